@@ -1,0 +1,17 @@
+"""rdsl: a compiler for physically based rendering.
+
+``rdsl.jit(source_or_path)`` compiles in process, ``rdsl.load(path)`` loads what
+``rdsl compile`` wrote.
+"""
+
+__version__ = "0.1.0"
+
+
+def __getattr__(name: str):
+    # The runtime imports llvmlite and numpy; load it on first use so that `import rdsl`
+    # stays cheap and never fails because an optional tool is missing.
+    if name in ("jit", "load", "Module", "Kernel"):
+        from .runtime import api
+
+        return getattr(api, name)
+    raise AttributeError(name)

@@ -1,0 +1,202 @@
+"""The LLVM CPU backend: post-vectorize IR -> llvmlite IR -> optimized LLVM IR, asm, objects.
+
+Each exported kernel becomes
+
+* an internal ``alwaysinline`` body function taking the kernel's params as LLVM values
+  (varying ``f32`` -> ``<W x float>``, ``bool`` -> ``<W x i1>``, buffers -> ``ptr``) and
+  returning a literal struct of its results, and
+* two C entry points (see :func:`rdsl.compiler.backends.base.c_prototype`):
+  ``rdsl_<name>_range(begin, end, args..., outs..., mask)`` which loops over ``[begin, end)``
+  in steps of W (full vectors with plain loads and stores, the tail with masked ones), and
+  ``rdsl_<name>(n, ...)`` which calls it on ``[0, n)``.
+
+Instructions are lowered through ``llvm_ops.LOWER``, a dispatch table keyed by
+:class:`ir.Op`; the entry points are built by ``llvm_entry``.  The semantics are those of
+``docs/ir.md``, bit for bit: no fast-math, no FMA contraction.
+"""
+
+from __future__ import annotations
+
+import llvmlite.ir as L
+
+from .. import ir
+from ..diagnostics import CompileError
+from ..targets import Target, get_target
+from .base import Backend, c_name, kernels, result_names
+from .llvm_entry import emit_kernel
+from .llvm_ops import I32, Lowering, const, ll_type
+
+
+class LLVMBackend(Backend):
+    """x86-64 CPU code through LLVM (scalar, SSE4, AVX2, AVX-512)."""
+
+    name = "llvm"
+    emits = ("llvm", "asm", "obj")
+    supports_gather = True
+    supports_scatter = True
+    supports_float_rem = True
+    max_width = 16
+    widths = (1, 4, 8, 16)
+
+
+# --------------------------------------------------------------------------------------
+# Module lowering: body functions and C entry points
+
+
+class _ModuleLowering:
+    """Lowers a module: one body function plus C entry points per kernel."""
+
+    def __init__(self, module: ir.Module, target: Target) -> None:
+        self.ir = module
+        self.target = target
+        self.width = LLVMBackend().check_module(module)
+        if self.width != target.width:
+            raise CompileError(f"module was vectorized for width {self.width} but target "
+                               f"`{target.name}` has width {target.width}")
+        self.mod = L.Module(name=module.attrs.get("name", "rdsl"))
+        self.mod.triple = target.triple
+        self._intrinsics: dict[str, L.Function] = {}
+
+    # -- small utilities -----------------------------------------------------------------
+    def intrinsic(self, name: str, ret: L.Type, args: list[L.Type]) -> L.Function:
+        fn = self._intrinsics.get(name)
+        if fn is None:
+            fn = L.Function(self.mod, L.FunctionType(ret, args), name)
+            self._intrinsics[name] = fn
+        return fn
+
+    def attrs(self, fn: L.Function) -> None:
+        t = self.target
+        for a in (f'"target-cpu"="{t.cpu}"', f'"target-features"="{t.features}"',
+                  f'"min-legal-vector-width"="{t.vector_bits}"',
+                  f'"prefer-vector-width"="{t.vector_bits}"', "nounwind"):
+            set.add(fn.attributes, a)  # llvmlite only knows enum attributes
+
+    def splat(self, b: L.IRBuilder, v: L.Value, n: int) -> L.Value:
+        vty = L.VectorType(v.type, n)
+        ins = b.insert_element(L.Constant(vty, None), v, const(I32, 0))
+        return b.shuffle_vector(ins, L.Constant(vty, None), L.Constant(L.VectorType(I32, n),
+                                                                      [0] * n))
+
+    def guarded_load(self, b: L.IRBuilder, p: L.Value, ty: L.Type, align: int,
+                     m: L.Value) -> L.Value:
+        pre = b.block
+        with b.if_then(m):
+            loaded = b.load(p, typ=ty, align=align)
+            inner = b.block
+        phi = b.phi(ty)
+        phi.add_incoming(const(ty, 0), pre)
+        phi.add_incoming(loaded, inner)
+        return phi
+
+    # -- kernels -----------------------------------------------------------------------
+    def run(self) -> L.Module:
+        seen: dict[str, str] = {}
+        for fn in kernels(self.ir):
+            other = seen.setdefault(c_name(fn.name), fn.name)
+            if other != fn.name:
+                raise CompileError(f"kernels `{other}` and `{fn.name}` both export the C "
+                                   f"symbol rdsl_{c_name(fn.name)}", fn.loc)
+            emit_kernel(self, fn, self.body(fn))
+        return self.mod
+
+    def body(self, fn: ir.Function) -> L.Function:
+        params = [ll_type(p.value.type) for p in fn.params]
+        rty = L.LiteralStructType([ll_type(t) for t in fn.ret_types])
+        f = L.Function(self.mod, L.FunctionType(rty, params), f"rdsl.body.{c_name(fn.name)}")
+        f.linkage = "internal"
+        f.attributes.add("alwaysinline")
+        self.attrs(f)
+        lw = Lowering(self, f)
+        for p, arg in zip(fn.params, f.args):
+            lw.vals[p.value] = arg
+        lw.block(fn.body)
+        if not lw.b.block.is_terminated:
+            raise CompileError(f"kernel `{fn.name}` does not end in `return`", fn.loc)
+        return f
+
+# --------------------------------------------------------------------------------------
+# Public API
+
+
+def lower_module(module: ir.Module, target: Target | str) -> L.Module:
+    """The unoptimized llvmlite module for ``module``."""
+    return _ModuleLowering(module, get_target(target)).run()
+
+
+def _binding():
+    import llvmlite.binding as llvm
+
+    llvm.initialize_native_target()
+    llvm.initialize_native_asmprinter()
+    return llvm
+
+
+def target_machine(target: Target | str):
+    """An llvmlite TargetMachine for ``target`` (position independent, O3)."""
+    t = get_target(target)
+    llvm = _binding()
+    tgt = llvm.Target.from_triple(t.triple)
+    return tgt.create_target_machine(cpu=t.cpu, features=t.features, opt=3, reloc="pic",
+                                     codemodel="default")
+
+
+def optimized_module(module: ir.Module, target: Target | str):
+    """Lower, verify and optimize with LLVM's O3 pipeline; return the binding ModuleRef."""
+    t = get_target(target)
+    llvm = _binding()
+    text = str(lower_module(module, t))
+    try:
+        mod = llvm.parse_assembly(text)
+        mod.verify()
+    except RuntimeError as e:  # an internal error: show the IR we produced
+        raise CompileError(f"internal error: the LLVM backend produced invalid IR: {e}\n"
+                           + text) from None
+    tm = target_machine(t)
+    mod.triple = t.triple
+    mod.data_layout = str(tm.target_data)
+    pto = llvm.PipelineTuningOptions(speed_level=3)
+    # our vectorization is explicit: keep LLVM from re-vectorizing the lane loops (and keep
+    # the scalar target scalar, so that speedups measure our vectorizer)
+    pto.loop_vectorization = False
+    pto.slp_vectorization = t.width > 1
+    pb = llvm.create_pass_builder(tm, pto)
+    pb.getModulePassManager().run(mod, pb)
+    return mod, tm
+
+
+def emit_llvm(module: ir.Module, target: Target | str = "host") -> str:
+    """Optimized textual LLVM IR."""
+    mod, _ = optimized_module(module, target)
+    return str(mod)
+
+
+def emit_asm(module: ir.Module, target: Target | str = "host") -> str:
+    """Assembly for ``target``."""
+    mod, tm = optimized_module(module, target)
+    return tm.emit_assembly(mod)
+
+
+def emit_object(module: ir.Module, target: Target | str = "host") -> bytes:
+    """An ELF object file for ``target``."""
+    mod, tm = optimized_module(module, target)
+    return tm.emit_object(mod)
+
+
+def kernel_signatures(module: ir.Module) -> dict[str, str]:
+    """Kernel name -> C prototype of its ``rdsl_<name>`` entry point."""
+    from .base import c_prototype
+
+    return {fn.name: c_prototype(fn) for fn in kernels(module)}
+
+
+__all__ = [
+    "LLVMBackend",
+    "emit_asm",
+    "emit_llvm",
+    "emit_object",
+    "kernel_signatures",
+    "ll_type",
+    "lower_module",
+    "result_names",
+]

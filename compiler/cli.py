@@ -1,0 +1,167 @@
+"""The ``rdsl`` command line: ``check``, ``ir`` and ``compile``.
+
+User mistakes print diagnostics and exit with status 1; they never show a traceback.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+from .diagnostics import CompileError
+from .driver import InternalError
+
+
+def _parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog="rdsl", description="A compiler for physically based "
+                                "rendering.")
+    sub = p.add_subparsers(dest="cmd", required=True)
+
+    c = sub.add_parser("check", help="parse and type-check a .rdsl file")
+    c.add_argument("file")
+
+    i = sub.add_parser("ir", help="print the IR, after any pass")
+    i.add_argument("file")
+    i.add_argument("--variant", default="rgb")
+    i.add_argument("--target", default="host")
+    i.add_argument("--print-after", default=None, metavar="PASS",
+                   help="print after every run of PASS ('lower' for the frontend's IR, "
+                        "'all' for every pass); default: the final IR")
+    i.add_argument("--no-locs", action="store_true", help="omit source locations")
+
+    k = sub.add_parser("compile", help="compile to a shared library, C header and manifest")
+    k.add_argument("file")
+    k.add_argument("--target", default="host",
+                   help="scalar, sse4, avx2, avx512 or host (default)")
+    k.add_argument("--variant", default="rgb")
+    k.add_argument("-o", "--output", default=None,
+                   help="output stem: writes STEM.so, STEM.h and STEM.json "
+                        "(default: the source's name in the current folder)")
+    k.add_argument("--emit", choices=["lib", "llvm", "asm", "obj"], default="lib",
+                   help="what to produce; llvm/asm go to stdout unless -o is given")
+    return p
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = _parser().parse_args(argv)
+    try:
+        return {"check": _check, "ir": _ir, "compile": _compile}[args.cmd](args)
+    except CompileError as e:
+        print(e.format(), file=sys.stderr)
+        return 1
+    except InternalError as e:
+        print(f"rdsl: {e}\nThis is a bug in rdsl; please report it with the input file.",
+              file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print("interrupted", file=sys.stderr)
+        return 130
+    finally:
+        sys.stdout.flush()
+
+
+def _require_file(path: str) -> Path:
+    p = Path(path)
+    if not p.is_file():
+        raise CompileError(f"{path}: error: no such file")
+    return p
+
+
+def _check(args: argparse.Namespace) -> int:
+    from ..dsl import check
+
+    check(_require_file(args.file))
+    print(f"{args.file}: ok")
+    return 0
+
+
+def _ir(args: argparse.Namespace) -> int:
+    from .driver import frontend, pipeline, run_passes
+    from .passes import pass_names
+    from .printer import print_module
+    from .targets import get_target
+
+    names = pass_names() + ["lower", "all"]
+    if args.print_after is not None and args.print_after not in names:
+        raise CompileError(f"unknown pass `{args.print_after}` (expected one of: "
+                           f"{', '.join(names)})")
+    tgt = get_target(args.target)
+    module = frontend(_require_file(args.file))
+    if args.print_after in ("lower", "all"):
+        print("// ----- after lower -----")
+        print(print_module(module, locs=not args.no_locs), end="")
+    if args.print_after == "lower":
+        return 0
+    out = _LocFilter(sys.stdout) if args.no_locs else sys.stdout
+    run_passes(module, pipeline(args.variant, tgt.width), print_after=args.print_after,
+               out=out)
+    if args.print_after is None:
+        print(print_module(module, locs=not args.no_locs), end="")
+    return 0
+
+
+class _LocFilter:
+    """Strips ` loc(...)` suffixes from printed IR."""
+
+    def __init__(self, stream) -> None:
+        self.stream = stream
+
+    def write(self, text: str) -> None:
+        import re
+
+        self.stream.write(re.sub(r" +loc\([^)]*\)", "", text))
+
+
+def _compile(args: argparse.Namespace) -> int:
+    from .backends.clib import build_library
+    from .backends.llvm import emit_asm, emit_llvm, emit_object
+    from .driver import compile_kernels
+    from .targets import get_target
+
+    src = _require_file(args.file).resolve()
+    tgt = get_target(args.target)
+    module, _ = compile_kernels(src, target=tgt.name, variant=args.variant)
+    if args.emit in ("llvm", "asm", "obj"):
+        data = {"llvm": lambda: emit_llvm(module, tgt), "asm": lambda: emit_asm(module, tgt),
+                "obj": lambda: emit_object(module, tgt)}[args.emit]()
+        if args.output is None and args.emit != "obj":
+            sys.stdout.write(data)
+            return 0
+        ext = {"llvm": ".ll", "asm": ".s", "obj": ".o"}[args.emit]
+        out = Path(args.output) if args.output else Path(src.stem + ext)
+        _refuse_input(out, src)
+        _write(out, data)
+        print(f"wrote {out}")
+        return 0
+    stem = Path(args.output) if args.output else Path(src.stem)
+    if stem.suffix in (".so", ".h", ".json"):
+        stem = stem.with_suffix("")
+    for ext in (".so", ".h", ".json"):
+        _refuse_input(stem.with_suffix(ext) if stem.suffix == "" else
+                      Path(str(stem) + ext), src)
+    paths = build_library(module, tgt, stem.parent if str(stem.parent) else Path("."),
+                          stem.name)
+    for p in paths.values() if isinstance(paths, dict) else paths:
+        print(f"wrote {p}")
+    return 0
+
+
+def _refuse_input(out: Path, src: Path) -> None:
+    if out.resolve() == src:
+        raise CompileError(f"{out}: error: refusing to overwrite the input file")
+
+
+def _write(path: Path, data: str | bytes) -> None:
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        if isinstance(data, bytes):
+            path.write_bytes(data)
+        else:
+            path.write_text(data)
+    except OSError as e:
+        raise CompileError(f"{path}: error: cannot write output: {e.strerror}") from e
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,140 @@
+"""The compiler driver: source -> IR -> passes -> kernels.
+
+The pipeline reads top to bottom; each entry says what it is for.  Errors raised inside a
+pass keep their user-facing diagnostic; anything else is reported as an internal compiler
+error naming the pass.
+"""
+
+from __future__ import annotations
+
+import re
+import sys
+from collections.abc import Callable
+from pathlib import Path
+from typing import TextIO
+
+from .diagnostics import CompileError
+from .ir import Module
+from .passes import Pass
+from .passes.inline import Inline
+from .passes.lift import Lift
+from .passes.optimize import Optimize
+from .passes.scalarize import Scalarize
+from .passes.vectorize import Vectorize
+
+STDLIB = Path(__file__).resolve().parent.parent / "stdlib"
+PRELUDE = ("types", "math")
+
+
+class InternalError(Exception):
+    """A bug in rdsl (not the user's fault), tagged with the pass that hit it."""
+
+
+def pipeline(variant: str, width: int) -> list[Pass]:
+    """The passes from lowered IR to vectorized scalar IR, in order."""
+    return [
+        Inline(),  # calls become bodies; recursion is a diagnostic
+        Optimize(),  # fold and prune early, so later passes see less
+        Lift(variant),  # Spectrum becomes mono/rgb; `if const` traits become constants
+        Optimize(),  # fold the trait branches away
+        Scalarize(),  # aggregates become scalars; kernel ABI recorded
+        Optimize(),  # forward extracts, CSE the leaves
+        Vectorize(width),  # SPMD over lanes with masks
+        Optimize(),  # CSE broadcasts and masks
+    ]
+
+
+def run_passes(module: Module, passes: list[Pass], verify: bool = True,
+               print_after: str | None = None, out: TextIO = sys.stdout,
+               stop_after: str | None = None) -> Module:
+    """Run ``passes`` in order, verifying after each and printing where asked."""
+    from .printer import print_module
+    from .verify import verify as verify_module
+
+    if verify:
+        _guard("lower", lambda: verify_module(module))
+    for p in passes:
+        _guard(p.name, lambda p=p: p.run(module))
+        if verify:
+            _guard(p.name, lambda: verify_module(module))
+        if print_after in (p.name, "all"):
+            out.write(f"// ----- after {p.name} -----\n")
+            out.write(print_module(module))
+        if stop_after == p.name:
+            break
+    return module
+
+
+def _guard(name: str, fn: Callable[[], object]) -> None:
+    try:
+        fn()
+    except CompileError:
+        raise
+    except RecursionError as e:
+        raise CompileError(f"program too deeply nested (in pass `{name}`)") from e
+    except Exception as e:  # a compiler bug: say where it happened
+        raise InternalError(f"internal compiler error in pass `{name}`: "
+                            f"{type(e).__name__}: {e}") from e
+
+
+def frontend(source_or_path: str | Path, filename: str | None = None) -> Module:
+    """Parse, check and lower a program to IR."""
+    from ..dsl import compile_to_ir
+
+    try:
+        return compile_to_ir(source_or_path, filename=filename)
+    except CompileError:
+        raise
+    except RecursionError as e:
+        raise CompileError("program too deeply nested") from e
+
+
+def compile_kernels(source_or_path: str | Path, target: str = "host", variant: str = "rgb",
+                    filename: str | None = None) -> tuple[Module, list[Path]]:
+    """Compile to post-vectorize IR for ``target``.  Returns the module and the source
+    files it was built from (for cache keys)."""
+    from .targets import get_target
+
+    tgt = get_target(target)
+    module = frontend(source_or_path, filename)
+    run_passes(module, pipeline(variant, tgt.width))
+    module.attrs["target"] = tgt.name
+    return module, source_files(source_or_path)
+
+
+def is_path(source_or_path: str | Path) -> bool:
+    if isinstance(source_or_path, Path):
+        return True
+    s = str(source_or_path)
+    return "\n" not in s and (s.endswith(".rdsl") or Path(s).is_file())
+
+
+def source_files(source_or_path: str | Path) -> list[Path]:
+    """The main file (if any), everything it imports, and the prelude, resolved the way the
+    frontend resolves imports.  Used to key the kernel cache."""
+    files: list[Path] = []
+    seen: set[Path] = set()
+
+    def visit(path: Path) -> None:
+        path = path.resolve()
+        if path in seen or not path.is_file():
+            return
+        seen.add(path)
+        files.append(path)
+        scan(path.read_text(errors="replace"), path.parent)
+
+    def scan(text: str, folder: Path) -> None:
+        for m in re.finditer(r"^\s*import\s+([A-Za-z_][\w.]*)\s*;", text, re.MULTILINE):
+            rel = Path(*m.group(1).split(".")).with_suffix(".rdsl")
+            for base in (folder, STDLIB):
+                if (base / rel).is_file():
+                    visit(base / rel)
+                    break
+
+    if is_path(source_or_path):
+        visit(Path(source_or_path))
+    else:
+        scan(str(source_or_path), Path.cwd())
+    for name in PRELUDE:
+        visit(STDLIB / f"{name}.rdsl")
+    return files

@@ -1,0 +1,70 @@
+"""``inline``: replace every call by the callee's body.
+
+Expects: a verified module straight from lowering, with ``call`` ops naming functions in the
+module, and function bodies whose only ``return`` is the last instruction of the body (the
+frontend turns early returns into flags).
+
+Guarantees: exported functions contain no ``call``; only exported functions remain (the
+library functions they used have been copied into them).  Recursion, direct or mutual, is a
+diagnostic at the call site that closes the cycle.
+"""
+
+from __future__ import annotations
+
+from ..diagnostics import CompileError, Diagnostic
+from ..ir import Block, Function, Instr, Module, Op, Value, clone_block, replace_uses
+from . import Pass, register
+
+
+@register
+class Inline(Pass):
+    name = "inline"
+
+    def run(self, module: Module) -> None:
+        self.module = module
+        self.done: set[str] = set()
+        self.stack: list[tuple[str, Instr | None]] = []
+        for fn in list(module.functions.values()):
+            self._inline_function(fn, None)
+        for name in [n for n, f in module.functions.items() if not f.attrs.get("export")]:
+            del module.functions[name]
+
+    def _inline_function(self, fn: Function, site: Instr | None) -> None:
+        if fn.name in self.done:
+            return
+        names = [n for n, _ in self.stack]
+        if fn.name in names:
+            cycle = names[names.index(fn.name):] + [fn.name]
+            pretty = " -> ".join(self.module.functions[n].attrs.get("source_name", n)
+                                 for n in cycle)
+            loc = site.loc if site is not None else fn.loc
+            raise CompileError([Diagnostic(loc, f"recursion is not supported: {pretty}")])
+        self.stack.append((fn.name, site))
+        mapping: dict[Value, Value] = {}
+        self._inline_block(fn.body, mapping)
+        replace_uses(fn.body, mapping)
+        self.stack.pop()
+        self.done.add(fn.name)
+
+    def _inline_block(self, block: Block, mapping: dict[Value, Value]) -> None:
+        out: list[Instr] = []
+        for ins in block.instrs:
+            for region in ins.regions:
+                self._inline_block(region, mapping)
+            if ins.op is not Op.CALL:
+                out.append(ins)
+                continue
+            callee = self.module.functions.get(ins.attrs["callee"])
+            if callee is None:
+                raise CompileError([Diagnostic(ins.loc,
+                                               f"unknown function `{ins.attrs['callee']}`")])
+            self._inline_function(callee, ins)
+            args = [mapping.get(v, v) for v in ins.operands]
+            local = {p.value: a for p, a in zip(callee.params, args)}
+            body = clone_block(callee.body, local)
+            ret = body.instrs.pop()
+            assert ret.op is Op.RETURN, f"{callee.name}: body must end in return"
+            out.extend(body.instrs)
+            for res, val in zip(ins.results, ret.operands):
+                mapping[res] = val
+        block.instrs = out

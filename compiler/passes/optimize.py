@@ -1,0 +1,489 @@
+"""``optimize``: constant folding, IEEE-legal simplification, CSE and DCE, to a fixed point.
+
+Expects: a verified module (any stage).  Guarantees: the same observable behaviour, bit for
+bit (NaN payloads aside where IEEE allows quieting, e.g. ``x * 1``), checked by differential
+tests against the interpreter.  In detail:
+
+* constants are folded with :func:`rdsl.compiler.interp.eval_pure` (the interpreter's own
+  semantics), only from ``const`` without a ``trait`` and only to scalar results;
+* algebraic rules are the IEEE-exact ones: ``x*1``, ``x/1``, ``x+(-0.0)``, ``x-0.0`` for
+  floats (never ``x+0.0`` or ``x*0``), the usual identities for ints and bools,
+  ``not not x``, ``neg neg x``, ``select`` with a constant or repeated operand, and
+  ``extract`` forwarded through ``make``/``insert``/``broadcast``;
+* an ``if`` with a constant condition is replaced by its taken region; a ``loop`` whose
+  continue flag is constant false on the first iteration is replaced by one copy of its body;
+* pure ops are CSE'd within their scope; pure instructions, side-effect-free ``if``/``loop``
+  and unused ``if``/``loop`` result slots are deleted;
+* functions neither exported (``attrs["export"]``) nor reachable by calls from an exported
+  one are removed (only when the module exports something).
+"""
+
+from __future__ import annotations
+
+import struct
+from collections import deque
+from typing import Any
+
+import numpy as np
+
+from ..interp import InterpError, coerce, eval_pure, f32_bits
+from ..ir import (
+    PURE_OPS,
+    TERMINATORS,
+    Block,
+    Function,
+    Instr,
+    Module,
+    Op,
+    ScalarType,
+    Value,
+    clone_block,
+)
+from . import Pass, register
+
+MAX_ITERATIONS = 50
+_EFFECT_OPS = {Op.STORE, Op.SCATTER, Op.CALL, Op.RETURN}
+
+
+def _attr_key(v: Any) -> Any:
+    """A hashable key that tells apart everything that behaves differently (True vs 1,
+    0.0 vs -0.0, NaN payloads)."""
+    if isinstance(v, (bool, np.bool_)):
+        return ("b", bool(v))
+    if isinstance(v, (int, np.integer)):
+        return ("i", int(v))
+    if isinstance(v, (float, np.floating)):
+        return ("f", struct.pack("<d", float(v)))
+    if isinstance(v, (list, tuple)):
+        return ("l", tuple(_attr_key(x) for x in v))
+    if isinstance(v, dict):
+        return ("d", tuple((k, _attr_key(x)) for k, x in sorted(v.items())))
+    return ("r", repr(v))
+
+
+def _to_attr(val: Any, t: ScalarType) -> Any:
+    """The ``const`` attribute for an interpreter value, or None if it can't be one exactly."""
+    if t.name == "bool":
+        return bool(val)
+    if t.name == "f32":
+        f = float(val)
+        return f if f32_bits(coerce(f, t)) == f32_bits(val) else None  # e.g. signalling NaNs
+    return int(val)
+
+
+def _is_scalar(t: Any) -> bool:
+    return isinstance(t, ScalarType) and t.lanes == 1
+
+
+class _Simplifier:
+    """One forward sweep over a function: folding, rewriting, CSE, region inlining."""
+
+    def __init__(self) -> None:
+        self.repl: dict[Value, Value] = {}
+        self.consts: dict[Value, Any] = {}
+        self.scopes: list[dict[Any, Value]] = []
+        self.changed = False
+        self.speculating = False
+
+    def find(self, v: Value) -> Value:
+        while v in self.repl:
+            v = self.repl[v]
+        return v
+
+    def block(self, block: Block) -> None:
+        self.scopes.append({})
+        work = deque(block.instrs)
+        out: list[Instr] = []
+        while work:
+            ins = work.popleft()
+            ins.operands = [self.find(v) for v in ins.operands]
+            if ins.op is Op.IF:
+                c = self.consts.get(ins.operands[0])
+                if c is not None:
+                    taken = ins.regions[0 if c else 1]
+                    for r, v in zip(ins.results, taken.instrs[-1].operands):
+                        self.repl[r] = v
+                    work.extendleft(reversed(taken.instrs[:-1]))
+                    self.changed = True
+                    continue
+                for r in ins.regions:
+                    self.block(r)
+            elif ins.op is Op.LOOP:
+                peeled = None if self.speculating else self.peel(ins)
+                if peeled is not None:
+                    out.extend(peeled)
+                    continue
+                self.block(ins.regions[0])
+            elif ins.op in PURE_OPS and len(ins.results) == 1 and not self.pure(ins):
+                continue
+            out.append(ins)
+        block.instrs = out
+        self.scopes.pop()
+
+    def peel(self, loop: Instr) -> list[Instr] | None:
+        """If the loop's continue flag is a constant false on the first iteration, return the
+        (already simplified) instructions of one copy of the body."""
+        body = loop.regions[0]
+        clone = clone_block(body, dict(zip(body.args, loop.operands)))
+        changed = self.changed
+        self.speculating = True
+        try:
+            self.block(clone)
+        finally:
+            self.speculating = False
+        y = clone.instrs[-1]
+        if self.consts.get(self.find(y.operands[0])) is not False:
+            self.changed = changed
+            return None
+        for r, v in zip(loop.results, y.operands[1:]):
+            self.repl[r] = v
+        self.changed = True
+        return clone.instrs[:-1]
+
+    def pure(self, ins: Instr) -> bool:
+        """Simplify a pure single-result instruction; False if it was replaced."""
+        r = self.rewrite(ins)
+        if r is not None:
+            self.repl[ins.result] = r
+            self.changed = True
+            return False
+        key = (ins.op, tuple(ins.operands), _attr_key(ins.attrs), ins.result.type)
+        for scope in reversed(self.scopes):
+            if key in scope:
+                self.repl[ins.result] = scope[key]
+                self.changed = True
+                return False
+        self.scopes[-1][key] = ins.result
+        if ins.op is Op.CONST and "trait" not in ins.attrs and "value" in ins.attrs:
+            try:
+                self.consts[ins.result] = coerce(ins.attrs["value"], ins.result.type)
+            except (InterpError, TypeError, ValueError, OverflowError):
+                pass
+        return True
+
+    def make_const(self, ins: Instr, val: Any) -> bool:
+        attr = _to_attr(val, ins.result.type)
+        if attr is None:
+            return False
+        ins.op, ins.operands, ins.attrs = Op.CONST, [], {"value": attr}
+        self.changed = True
+        return True
+
+    def rewrite(self, ins: Instr) -> Value | None:
+        """Return a value equal to ``ins``'s result, or None (possibly after rewriting
+        ``ins`` in place, e.g. into a constant)."""
+        op, ops, t = ins.op, ins.operands, ins.result.type
+        if op is Op.CONST:
+            return None
+        cs = [self.consts.get(v) for v in ops]
+        if ops and _is_scalar(t) and all(c is not None for c in cs) \
+                and all(v.type.lanes == 1 for v in ops):
+            try:
+                val = eval_pure(op, t, [v.type for v in ops], cs, ins.attrs)
+            except (InterpError, IndexError, KeyError, TypeError):
+                val = None
+            if val is not None and self.make_const(ins, val):
+                return None
+        if op is Op.SELECT:
+            if cs[0] is not None:
+                return ops[1] if cs[0] else ops[2]
+            if ops[1] is ops[2]:
+                return ops[1]
+            if t == ops[0].type and cs[1] is True and cs[2] is False:
+                return ops[0]
+            return None
+        if op in (Op.CAST, Op.BITCAST):
+            return ops[0] if ops[0].type == t else None
+        if op is Op.EXTRACT:
+            return self.extract(ins)
+        if not _is_scalar(t) or not ops or ops[0].type != t and op not in _CMP:
+            return None
+        return _ALGEBRA.get(op, _no_rule)(self, ins, ops, cs, t)
+
+    def extract(self, ins: Instr) -> Value | None:
+        idx = ins.attrs.get("index")
+        while True:
+            src = ins.operands[0]
+            d = src.owner
+            if not isinstance(d, Instr):
+                return None
+            if d.op is Op.MAKE and isinstance(idx, int) and idx < len(d.operands):
+                v = d.operands[idx]
+                return v if v.type == ins.result.type else None
+            if d.op is Op.BROADCAST and d.operands[0].type == ins.result.type:
+                return d.operands[0]
+            if d.op is Op.INSERT:
+                if d.attrs.get("index") == idx:
+                    return d.operands[1] if d.operands[1].type == ins.result.type else None
+                ins.operands = [d.operands[0]]
+                self.changed = True
+                continue
+            return None
+
+
+# --------------------------------------------------------------------------------------
+# Algebraic identities (scalars only; every rule is exact under IEEE-754 and wrapping ints)
+
+_CMP = {Op.EQ, Op.NE, Op.LT, Op.LE, Op.GT, Op.GE}
+
+
+def _no_rule(s: _Simplifier, ins: Instr, ops: list, cs: list, t: ScalarType) -> Value | None:
+    return None
+
+
+def _is(c: Any, t: ScalarType, x: float) -> bool:
+    """Is constant ``c`` exactly ``x`` (for floats: the same bits, so -0.0 != 0.0)?"""
+    if c is None:
+        return False
+    if t.name == "f32":
+        return f32_bits(c) == f32_bits(np.float32(x))
+    if t.name == "bool":
+        return bool(c) == bool(x)
+    return int(c) == x
+
+
+def _ones(t: ScalarType) -> int:
+    return {"i32": -1, "u32": 0xFFFF_FFFF, "u64": 0xFFFF_FFFF_FFFF_FFFF, "bool": 1}[t.name]
+
+
+def _zero(s: _Simplifier, ins: Instr, t: ScalarType) -> None:
+    s.make_const(ins, coerce(0, t))
+
+
+def _add(s, ins, ops, cs, t):
+    zero = -0.0 if t.is_float else 0  # x + (-0.0) == x for every x; x + 0.0 is not
+    if _is(cs[1], t, zero):
+        return ops[0]
+    if _is(cs[0], t, zero):
+        return ops[1]
+    return None
+
+
+def _sub(s, ins, ops, cs, t):
+    if _is(cs[1], t, 0):  # x - (+0.0) == x
+        return ops[0]
+    if t.is_int and ops[0] is ops[1]:
+        _zero(s, ins, t)
+    return None
+
+
+def _mul(s, ins, ops, cs, t):
+    if _is(cs[1], t, 1):
+        return ops[0]
+    if _is(cs[0], t, 1):
+        return ops[1]
+    if t.is_int and (_is(cs[0], t, 0) or _is(cs[1], t, 0)):
+        _zero(s, ins, t)
+    return None
+
+
+def _div(s, ins, ops, cs, t):
+    return ops[0] if _is(cs[1], t, 1) else None
+
+
+def _rem(s, ins, ops, cs, t):
+    if t.is_int and _is(cs[1], t, 1):
+        _zero(s, ins, t)
+
+
+def _and(s, ins, ops, cs, t):
+    if ops[0] is ops[1]:
+        return ops[0]
+    for a, c in ((ops[0], cs[1]), (ops[1], cs[0])):
+        if _is(c, t, _ones(t)):
+            return a
+        if _is(c, t, 0):
+            _zero(s, ins, t)
+            return None
+    return None
+
+
+def _or(s, ins, ops, cs, t):
+    if ops[0] is ops[1]:
+        return ops[0]
+    for a, c in ((ops[0], cs[1]), (ops[1], cs[0])):
+        if _is(c, t, 0):
+            return a
+        if _is(c, t, _ones(t)):
+            s.make_const(ins, coerce(_ones(t), t))
+            return None
+    return None
+
+
+def _xor(s, ins, ops, cs, t):
+    if _is(cs[1], t, 0):
+        return ops[0]
+    if _is(cs[0], t, 0):
+        return ops[1]
+    if ops[0] is ops[1]:
+        _zero(s, ins, t)
+    return None
+
+
+def _involution(s, ins, ops, cs, t):
+    d = ops[0].owner  # not(not x) == x, neg(neg x) == x (sign-bit flips for floats)
+    if isinstance(d, Instr) and d.op is ins.op and d.operands[0].type == t:
+        return d.operands[0]
+    return None
+
+
+def _shift(s, ins, ops, cs, t):
+    return ops[0] if cs[1] is not None and int(cs[1]) % t.bits == 0 else None
+
+
+def _minmax(s, ins, ops, cs, t):
+    return ops[0] if ops[0] is ops[1] else None
+
+
+def _cmp(s, ins, ops, cs, t):
+    a = ops[0].type
+    if ops[0] is ops[1] and isinstance(a, ScalarType) and not a.is_float and a.lanes == 1:
+        s.make_const(ins, ins.op in (Op.EQ, Op.LE, Op.GE))
+
+
+_ALGEBRA = {
+    Op.ADD: _add, Op.SUB: _sub, Op.MUL: _mul, Op.DIV: _div, Op.REM: _rem,
+    Op.AND: _and, Op.OR: _or, Op.XOR: _xor, Op.NOT: _involution, Op.NEG: _involution,
+    Op.SHL: _shift, Op.SHR: _shift, Op.MIN: _minmax, Op.MAX: _minmax,
+    **{op: _cmp for op in _CMP},
+}
+
+# --------------------------------------------------------------------------------------
+# Dead code elimination (mark and sweep, with per-slot liveness of if/loop results)
+
+
+def _dce(fn: Function) -> bool:
+    parent: dict[Instr, Instr | None] = {}
+    producer: dict[Value, tuple[Instr, int]] = {}
+
+    def index(block: Block, owner: Instr | None) -> None:
+        if owner is not None and owner.op is Op.LOOP:
+            for k, a in enumerate(block.args):
+                producer[a] = (owner, k)
+        for ins in block.instrs:
+            parent[ins] = owner
+            for k, r in enumerate(ins.results):
+                producer[r] = (ins, k)
+            for r in ins.regions:
+                index(r, ins)
+
+    index(fn.body, None)
+    live: set[Instr] = set()
+    slots: set[tuple[Instr, int]] = set()
+    seen: set[Value] = set()
+    work: list[Value] = []
+
+    def push(v: Value) -> None:
+        if v not in seen:
+            seen.add(v)
+            work.append(v)
+
+    def mark(ins: Instr | None) -> None:
+        while ins is not None and ins not in live:
+            live.add(ins)
+            if ins.op is Op.IF:
+                push(ins.operands[0])
+            elif ins.op is Op.LOOP:
+                push(ins.regions[0].instrs[-1].operands[0])
+            elif ins.op is not Op.YIELD:
+                for v in ins.operands:
+                    push(v)
+            ins = parent[ins]
+
+    def mark_slot(ins: Instr, k: int) -> None:
+        if (ins, k) in slots:
+            return
+        slots.add((ins, k))
+        mark(ins)
+        if ins.op is Op.IF:
+            for r in ins.regions:
+                push(r.instrs[-1].operands[k])
+        else:
+            push(ins.operands[k])
+            push(ins.regions[0].instrs[-1].operands[k + 1])
+
+    for ins in fn.walk():
+        if ins.op in _EFFECT_OPS:
+            mark(ins)
+    while work:
+        v = work.pop()
+        if v in producer:
+            ins, k = producer[v]
+            mark(ins)
+            if ins.op in (Op.IF, Op.LOOP):
+                mark_slot(ins, k)
+
+    changed = False
+
+    def sweep(block: Block) -> None:
+        nonlocal changed
+        out = []
+        for ins in block.instrs:
+            if ins.op not in TERMINATORS and ins not in live:
+                changed = True
+                continue
+            if ins.op in (Op.IF, Op.LOOP):
+                keep = [k for k in range(len(ins.results)) if (ins, k) in slots]
+                if len(keep) < len(ins.results):
+                    changed = True
+                    _prune_slots(ins, keep)
+            for r in ins.regions:
+                sweep(r)
+            out.append(ins)
+        block.instrs = out
+
+    sweep(fn.body)
+    return changed
+
+
+def _prune_slots(ins: Instr, keep: list[int]) -> None:
+    ins.results = [ins.results[k] for k in keep]
+    if ins.op is Op.IF:
+        for r in ins.regions:
+            y = r.instrs[-1]
+            y.operands = [y.operands[k] for k in keep]
+    else:
+        body = ins.regions[0]
+        y = body.instrs[-1]
+        ins.operands = [ins.operands[k] for k in keep]
+        body.args = [body.args[k] for k in keep]
+        y.operands = [y.operands[0]] + [y.operands[k + 1] for k in keep]
+
+
+def _remove_dead_functions(m: Module) -> None:
+    roots = [f for f in m.functions.values() if f.attrs.get("export")]
+    if not roots:
+        return
+    reached: set[str] = set()
+    stack = [f.name for f in roots]
+    while stack:
+        name = stack.pop()
+        if name in reached or name not in m.functions:
+            continue
+        reached.add(name)
+        stack.extend(i.attrs.get("callee") for i in m.functions[name].walk() if i.op is Op.CALL)
+    m.functions = {n: f for n, f in m.functions.items() if n in reached}
+
+
+def optimize_function(fn: Function) -> None:
+    """Simplify ``fn`` in place until nothing changes (or MAX_ITERATIONS sweeps)."""
+    with np.errstate(all="ignore"):
+        for _ in range(MAX_ITERATIONS):
+            s = _Simplifier()
+            s.block(fn.body)
+            changed = _dce(fn) or s.changed
+            if not changed:
+                return
+
+
+@register
+class Optimize(Pass):
+    """Constant folding, IEEE-exact simplification, CSE, DCE and dead-function removal."""
+
+    name = "optimize"
+
+    def run(self, module: Module) -> Module:
+        for fn in module.functions.values():
+            optimize_function(fn)
+        _remove_dead_functions(module)
+        return module

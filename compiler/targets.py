@@ -1,0 +1,96 @@
+"""CPU targets: a SIMD width plus the LLVM CPU name and feature string to compile for.
+
+``get_target("host")`` picks the widest target this machine can run, from
+``llvmlite.binding.get_host_cpu_features()``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from functools import lru_cache
+
+from .diagnostics import CompileError
+
+
+@dataclass(frozen=True)
+class Target:
+    """A CPU code-generation target.
+
+    ``requires`` lists the host CPU features (LLVM names, without ``+``) needed to *run* code
+    compiled for this target; ``vector_bits`` is the SIMD register width the kernels use."""
+
+    name: str
+    width: int
+    cpu: str
+    features: str
+    requires: tuple[str, ...] = ()
+    vector_bits: int = 128
+
+    @property
+    def triple(self) -> str:
+        import llvmlite.binding as llvm
+
+        return llvm.get_default_triple()
+
+
+_AVX512 = ("avx512f", "avx512bw", "avx512dq", "avx512vl", "avx512cd")
+
+TARGETS: dict[str, Target] = {
+    t.name: t
+    for t in (
+        Target("scalar", 1, "x86-64", "+sse,+sse2", ("sse2",), 128),
+        Target("sse4", 4, "x86-64", "+sse2,+sse3,+ssse3,+sse4.1,+sse4.2,+popcnt",
+               ("sse4.2", "popcnt"), 128),
+        Target("avx2", 8, "haswell", "+avx,+avx2,+fma,+bmi,+bmi2,+f16c,+popcnt",
+               ("avx2", "fma", "bmi2"), 256),
+        Target("avx512", 16, "skylake-avx512",
+               "+avx,+avx2,+fma,+bmi,+bmi2,+f16c,+popcnt,"
+               + ",".join("+" + f for f in _AVX512),
+               ("avx2", "fma") + _AVX512, 512),
+    )
+}
+
+# widest first: what "host" resolves to
+_PREFERENCE = ("avx512", "avx2", "sse4", "scalar")
+
+
+@lru_cache(maxsize=1)
+def host_features() -> frozenset[str]:
+    """The CPU features of this machine (LLVM names), or an empty set if unknown."""
+    try:
+        import llvmlite.binding as llvm
+
+        flags = llvm.get_host_cpu_features()
+        return frozenset(k for k, v in flags.items() if v)
+    except Exception:  # pragma: no cover - llvmlite cannot query some hosts
+        return frozenset()
+
+
+def host_supports(target: Target | str) -> bool:
+    """True if code compiled for ``target`` can run on this machine."""
+    t = get_target(target) if isinstance(target, str) else target
+    feats = host_features()
+    if not feats:
+        return t.name == "scalar"
+    return all(f in feats for f in t.requires)
+
+
+def host_target() -> Target:
+    """The widest target this machine supports."""
+    for name in _PREFERENCE:
+        if host_supports(TARGETS[name]):
+            return TARGETS[name]
+    return TARGETS["scalar"]
+
+
+def get_target(name: str | Target) -> Target:
+    """Look a target up by name (``scalar``, ``sse4``, ``avx2``, ``avx512`` or ``host``)."""
+    if isinstance(name, Target):
+        return name
+    if name == "host":
+        return host_target()
+    t = TARGETS.get(name)
+    if t is None:
+        valid = ", ".join([*TARGETS, "host"])
+        raise CompileError(f"unknown target `{name}` (valid targets: {valid})")
+    return t

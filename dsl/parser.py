@@ -1,0 +1,383 @@
+"""Source text -> AST, with lark's LALR parser and plain-words syntax errors."""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+from functools import lru_cache
+from pathlib import Path
+from typing import Any
+
+from lark import Lark, Token, Transformer, v_args
+from lark.exceptions import (
+    LarkError,
+    UnexpectedCharacters,
+    UnexpectedEOF,
+    UnexpectedInput,
+    UnexpectedToken,
+    VisitError,
+)
+from lark.lark import PostLex
+
+from ..compiler.diagnostics import CompileError, Diagnostic, register_source
+from ..compiler.ir import Loc
+from . import ast as A
+
+_GRAMMAR = Path(__file__).with_name("grammar.lark")
+
+
+class _Remember(PostLex):
+    """Pass tokens through, remembering the last one (to place "expected `;`" after it)."""
+
+    always_accept = ()
+
+    def __init__(self) -> None:
+        self.tokens: list[Token] = []
+
+    @property
+    def last(self) -> Token | None:
+        return self.tokens[-1] if self.tokens else None
+
+    def process(self, stream: Iterator[Token]) -> Iterator[Token]:
+        self.tokens = []
+        for tok in stream:
+            self.tokens.append(tok)
+            yield tok
+
+
+_POSTLEX = _Remember()
+# Parse trees of recently parsed files (the stdlib prelude is parsed for every program);
+# the transformer below never mutates a tree, so a fresh AST is built from it each time.
+_TREES: dict[tuple[str, str], Any] = {}
+
+
+@lru_cache(maxsize=1)
+def _lark() -> Lark:
+    return Lark(_GRAMMAR.read_text(), parser="lalr", lexer="contextual",
+                propagate_positions=True, maybe_placeholders=True, postlex=_POSTLEX)
+
+
+def parse(source: str, filename: str) -> A.Program:
+    """Parse ``source`` (the text of ``filename``) into an :class:`ast.Program`."""
+    register_source(filename, source)
+    parser = _lark()
+    tree = _TREES.get((filename, source))
+    if tree is None:
+        try:
+            tree = parser.parse(source)
+        except UnexpectedInput as e:
+            raise _syntax_error(e, filename, source, parser) from None
+        except LarkError as e:  # pragma: no cover - defensive
+            raise CompileError(f"syntax error: {e}", Loc(filename, 1, 1)) from None
+        if len(_TREES) > 64:
+            _TREES.pop(next(iter(_TREES)))
+        _TREES[(filename, source)] = tree
+    try:
+        return _ToAst(filename).transform(tree)
+    except VisitError as e:
+        if isinstance(e.orig_exc, CompileError):
+            raise e.orig_exc from None
+        raise
+
+
+# --------------------------------------------------------------------------------------
+# Syntax errors
+
+_NAMES = {
+    "NAME": "an identifier", "INT": "an integer", "FLOAT": "a number", "TRUE": "`true`",
+    "FALSE": "`false`", "STRUCT_START": "a struct literal", "$END": "end of file",
+}
+_EXPR_FOLLOW = {"PLUS", "STAR", "SLASH", "LPAR", "DOT", "LSQB"}
+_KEYWORDS = {"import", "struct", "fn", "param", "let", "var", "if", "else", "const", "for",
+             "in", "while", "break", "continue", "return"}
+_EXPR_START = {"NAME", "INT", "FLOAT", "LPAR"}
+_EXPR_END = {"NAME", "INT", "FLOAT", "TRUE", "FALSE", "RPAR", "RSQB", "RBRACE"}
+
+
+def _describe_terminal(name: str, parser: Lark) -> str:
+    if name in _NAMES:
+        return _NAMES[name]
+    try:
+        pat = parser.get_terminal(name).pattern
+        if pat.type == "str":
+            return f"`{pat.value}`"
+    except KeyError:
+        pass
+    return name.lower()
+
+
+def _describe_token(tok: Token) -> str:
+    if tok.type == "$END":
+        return "end of file"
+    text = str(tok).split("{")[0].strip() if tok.type == "STRUCT_START" else str(tok)
+    return f"`{text}`"
+
+
+def _syntax_error(e: UnexpectedInput, filename: str, source: str, parser: Lark) -> CompileError:
+    line = e.line if isinstance(e.line, int) and e.line > 0 else 1
+    col = e.column if isinstance(e.column, int) and e.column > 0 else 1
+    if isinstance(e, UnexpectedCharacters):
+        ch = source[e.pos_in_stream] if e.pos_in_stream < len(source) else "?"
+        if source.startswith("/*", e.pos_in_stream):
+            msg = "unterminated block comment"
+        else:
+            msg = f"unexpected character `{ch}`"
+        return CompileError(Diagnostic(Loc(filename, line, col), msg))
+    if isinstance(e, UnexpectedToken):
+        tok = e.token
+        found = _describe_token(tok)
+        # the tokens before the offending one (the postlexer may have yielded it already)
+        before = list(_POSTLEX.tokens)
+        if before and tok.type != "$END" and before[-1].start_pos == tok.start_pos:
+            before.pop()
+        prev = before[-1] if before else None
+        expected = _accepts(parser, before) or set(e.expected)
+        if tok.type == "$END":
+            line, col = _end_of(prev) if prev is not None else (1, 1)
+        ops = bool(expected & _EXPR_FOLLOW)
+        if tok.type == "SLASH" and source.startswith("/*", tok.start_pos or 0):
+            msg = "unterminated block comment"
+        elif any(t.type == "NAME" and str(t) in _KEYWORDS for t in before[-2:]):
+            kw = next(t for t in before[-2:] if t.type == "NAME" and str(t) in _KEYWORDS)
+            msg = f"unexpected `{kw}`"
+            line, col = kw.line, kw.column
+        elif tok.type == "$END":
+            msg = "unexpected end of file" + (", expected `}`" if "RBRACE" in expected else "")
+        elif "SEMICOLON" in expected and (len(expected) <= 3 or ops):
+            after_expr = prev is not None and prev.type in _EXPR_END
+            msg = f"expected `;`{' after expression' if after_expr else ''}, found {found}"
+            if prev is not None and prev.end_line < tok.line:
+                line, col = _end_of(prev)
+        elif "LBRACE" in expected and "RBRACE" not in expected:
+            msg = f"expected `{{`, found {found}"
+        elif ops and "RPAR" in expected:
+            msg = f"expected `)`, found {found}"
+        elif ops and "RSQB" in expected:
+            msg = f"expected `]`, found {found}"
+        elif _EXPR_START <= expected:
+            msg = f"expected an expression, found {found}"
+        elif len(expected) <= 4:
+            words = sorted(_describe_terminal(t, parser) for t in expected)
+            alts = words[0] if len(words) == 1 else ", ".join(words[:-1]) + " or " + words[-1]
+            msg = f"expected {alts}, found {found}"
+        else:
+            msg = f"unexpected {found}"
+        return CompileError(Diagnostic(Loc(filename, line, col), msg))
+    if isinstance(e, UnexpectedEOF):
+        last = _POSTLEX.last
+        line, col = _end_of(last) if last is not None else (1, 1)
+        return CompileError(Diagnostic(Loc(filename, line, col), "unexpected end of file"))
+    return CompileError(Diagnostic(Loc(filename, line, col), "syntax error"))
+
+
+def _accepts(parser: Lark, tokens: list[Token]) -> set[str]:
+    """The terminals the parser can shift after ``tokens`` (exact, unlike LALR lookaheads)."""
+    try:
+        ip = parser.parse_interactive("")
+        for t in tokens:
+            ip.feed_token(t)
+        return set(ip.accepts()) - {"$END"} if tokens else set(ip.accepts())
+    except Exception:  # noqa: BLE001 - best effort; fall back to lark's own expectations
+        return set()
+
+
+def _end_of(tok: Token) -> tuple[int, int]:
+    """The position just after ``tok``."""
+    end_line = getattr(tok, "end_line", None) or tok.line
+    end_col = getattr(tok, "end_column", None) or (tok.column + len(str(tok)))
+    return end_line, end_col
+
+
+# --------------------------------------------------------------------------------------
+# Tree -> AST
+
+_TRAITS = ("mono", "rgb", "spectral", "polarized")
+
+
+@v_args(meta=True)
+class _ToAst(Transformer):
+    """Builds :mod:`ast` nodes from lark's parse tree."""
+
+    def __init__(self, filename: str) -> None:
+        super().__init__()
+        self.file = filename
+
+    def _loc(self, meta: Any) -> Loc:
+        if getattr(meta, "empty", True):
+            return Loc(self.file, 0, 0)
+        return Loc(self.file, meta.line, meta.column)
+
+    def _tloc(self, tok: Token) -> Loc:
+        return Loc(self.file, tok.line, tok.column)
+
+    # ---- items
+    def start(self, meta, items):
+        prog = A.Program(self.file)
+        for it in items:
+            if isinstance(it, A.Import):
+                prog.imports.append(it)
+            elif isinstance(it, A.StructDecl):
+                prog.structs.append(it)
+            elif isinstance(it, A.FnDecl):
+                prog.fns.append(it)
+            elif isinstance(it, A.PluginDecl):
+                prog.plugins.append(it)
+        return prog
+
+    def import_decl(self, meta, names):
+        return A.Import([str(n) for n in names], self._loc(meta))
+
+    def struct_decl(self, meta, ch):
+        name, *fields = ch
+        return A.StructDecl(str(name), [f for f in fields if f is not None], self._tloc(name))
+
+    def field_decl(self, meta, ch):
+        return A.StructField(str(ch[0]), ch[1], self._tloc(ch[0]))
+
+    def fn_decl(self, meta, ch):
+        name = ch[0]
+        body = ch[-1]
+        ret = ch[-2]
+        params = [p for p in ch[1:-2] if p is not None]
+        return A.FnDecl(str(name), params, ret, body, self._tloc(name))
+
+    def param(self, meta, ch):
+        return A.ParamDecl(str(ch[0]), ch[1], self._tloc(ch[0]))
+
+    def plugin_decl(self, meta, ch):
+        kind, name, *members = ch
+        params = [m for m in members if isinstance(m, A.PluginParam)]
+        fns = [m for m in members if isinstance(m, A.FnDecl)]
+        return A.PluginDecl(str(kind), str(name), params, fns, self._tloc(name),
+                            self._tloc(kind))
+
+    def plugin_param(self, meta, ch):
+        return A.PluginParam(str(ch[0]), ch[1], ch[2], self._tloc(ch[0]))
+
+    # ---- types
+    def named_type(self, meta, ch):
+        return A.NamedType(self._loc(meta), str(ch[0]))
+
+    def buffer_type(self, meta, ch):
+        return A.BufferTypeExpr(self._loc(meta), ch[0])
+
+    def tuple_type(self, meta, ch):
+        return A.TupleTypeExpr(self._loc(meta), [c for c in ch if c is not None])
+
+    # ---- statements
+    def block(self, meta, ch):
+        return A.Block(self._loc(meta), list(ch))
+
+    def let_stmt(self, meta, ch):
+        return A.Let(self._loc(meta), ch[0], ch[1], ch[2])
+
+    def pat_name(self, meta, ch):
+        return A.PatName(str(ch[0]), self._tloc(ch[0]))
+
+    def pat_tuple(self, meta, ch):
+        return A.PatTuple([c for c in ch if c is not None], self._loc(meta))
+
+    def var_stmt(self, meta, ch):
+        return A.Var(self._loc(meta), str(ch[0]), ch[1], ch[2], self._tloc(ch[0]))
+
+    def assign_stmt(self, meta, ch):
+        target, op, value = ch
+        return A.Assign(self._loc(meta), target, op, value)
+
+    def assign_op(self, meta, ch):
+        return str(ch[0])
+
+    def if_stmt(self, meta, ch):
+        return A.If(self._loc(meta), ch[0], ch[1], ch[2] if len(ch) > 2 else None)
+
+    def if_const_stmt(self, meta, ch):
+        return A.IfConst(self._loc(meta), str(ch[0]), ch[1], ch[2] if len(ch) > 2 else None,
+                         self._tloc(ch[0]))
+
+    def for_stmt(self, meta, ch):
+        var, start, end, body = ch
+        return A.For(self._loc(meta), str(var), start, end, body, self._tloc(var))
+
+    def while_stmt(self, meta, ch):
+        return A.While(self._loc(meta), ch[0], ch[1])
+
+    def break_stmt(self, meta, ch):
+        return A.Break(self._loc(meta))
+
+    def continue_stmt(self, meta, ch):
+        return A.Continue(self._loc(meta))
+
+    def return_stmt(self, meta, ch):
+        return A.Return(self._loc(meta), ch[0])
+
+    def expr_stmt(self, meta, ch):
+        return A.ExprStmt(self._loc(meta), ch[0])
+
+    # ---- expressions
+    def binop(self, meta, ch):
+        left, op, right = ch
+        return A.Binary(self._loc(meta), op, left, right)
+
+    def unop(self, meta, ch):
+        op, operand = ch
+        return A.Unary(self._loc(meta), op, operand)
+
+    def _op(self, meta, ch):
+        return str(ch[0])
+
+    or_op = and_op = eq_op = rel_op = bor_op = bxor_op = band_op = _op
+    shift_op = add_op = mul_op = unary_op = _op
+
+    def call(self, meta, ch):
+        func, *args = ch
+        args = [a for a in args if a is not None]
+        return A.Call(self._loc(meta), func, args)
+
+    def field(self, meta, ch):
+        obj, name = ch
+        return A.Field(self._loc(meta), obj, str(name), self._tloc(name))
+
+    def tuple_field(self, meta, ch):
+        obj, idx = ch
+        text = str(idx)
+        if not text.isdigit():
+            raise CompileError(Diagnostic(self._tloc(idx), f"invalid tuple index `{text}`"))
+        return A.TupleField(self._loc(meta), obj, int(text))
+
+    def index(self, meta, ch):
+        return A.Index(self._loc(meta), ch[0], ch[1])
+
+    def int_lit(self, meta, ch):
+        tok = ch[0]
+        text = str(tok)
+        suffix = ""
+        body = text
+        if body.endswith("ul"):
+            suffix, body = "ul", body[:-2]
+        elif body.endswith("u"):
+            suffix, body = "u", body[:-1]
+        value = int(body, 16) if body[:2].lower() == "0x" else int(body, 10)
+        return A.IntLit(self._tloc(tok), value, suffix, text)
+
+    def float_lit(self, meta, ch):
+        tok = ch[0]
+        return A.FloatLit(self._tloc(tok), float(str(tok)), str(tok))
+
+    def bool_lit(self, meta, ch):
+        return A.BoolLit(self._tloc(ch[0]), str(ch[0]) == "true")
+
+    def name(self, meta, ch):
+        return A.Name(self._tloc(ch[0]), str(ch[0]))
+
+    def tuple_expr(self, meta, ch):
+        return A.TupleExpr(self._loc(meta), [c for c in ch if c is not None])
+
+    def struct_lit(self, meta, ch):
+        start, *fields = ch
+        name = str(start).split("{")[0].strip()
+        return A.StructLit(self._tloc(start), name, [f for f in fields if f is not None])
+
+    def field_init(self, meta, ch):
+        return A.FieldInit(str(ch[0]), ch[1], self._tloc(ch[0]))
+
+
+__all__ = ["UnexpectedEOF", "UnexpectedToken", "parse"]

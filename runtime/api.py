@@ -1,0 +1,212 @@
+"""The Python API: ``rdsl.jit`` compiles (through the disk cache), ``rdsl.load`` loads what
+``rdsl compile`` wrote.  Both return a :class:`Module` of callable :class:`Kernel` s."""
+
+from __future__ import annotations
+
+import atexit
+import ctypes
+import json
+import os
+import shutil
+import tempfile
+import time
+from pathlib import Path
+from typing import Any
+
+from ..compiler.diagnostics import CompileError
+from .cache import STEM, cache_dir, cache_key, entry_complete
+from .kernel import Kernel
+
+__all__ = ["Kernel", "Module", "jit", "load"]
+
+# path -> (inode, mtime) of every library dlopen'ed: dlopen returns the old handle for a
+# path it has already loaded, so a rebuilt library is loaded through a private copy
+_LOADED: dict[str, tuple[int, int]] = {}
+_COPIES: list[tempfile.TemporaryDirectory] = []
+
+
+def _dlopen(so: Path) -> ctypes.CDLL:
+    key = str(so.resolve())
+    st = so.stat()
+    ident = (st.st_ino, st.st_mtime_ns)
+    seen = _LOADED.get(key)
+    if seen is None or seen == ident:
+        _LOADED[key] = ident
+        return ctypes.CDLL(key)
+    tmp = tempfile.TemporaryDirectory(prefix="rdsl-lib-")
+    _COPIES.append(tmp)
+    copy = Path(tmp.name) / so.name
+    shutil.copy2(so, copy)
+    return ctypes.CDLL(str(copy))
+
+
+class _Namespace:
+    """``mod.roughconductor.eval`` for a kernel named ``roughconductor.eval``."""
+
+    def __init__(self, module: Module, prefix: str) -> None:
+        self._module, self._prefix = module, prefix
+
+    def __getattr__(self, name: str) -> Any:
+        return self._module._lookup(f"{self._prefix}.{name}")
+
+    def __dir__(self) -> list[str]:
+        p = self._prefix + "."
+        return sorted({k[len(p):].split(".")[0] for k in self._module.kernels
+                       if k.startswith(p)})
+
+
+class Module:
+    """A loaded library of kernels: ``mod["bsdf.eval"]``, ``mod.kernels``, ``mod.lerp``."""
+
+    def __init__(self, manifest: dict[str, Any], lib: ctypes.CDLL, path: Path | None = None,
+                 from_cache: bool = False, compile_seconds: float = 0.0) -> None:
+        self.manifest = manifest
+        self.path = path
+        self.target: str = manifest["target"]
+        self.width: int = int(manifest["width"])
+        self.variant = manifest.get("variant")
+        self.from_cache = from_cache
+        self.compile_seconds = compile_seconds
+        self._lib = lib
+        self.kernels: dict[str, Kernel] = {k["name"]: Kernel(self, k, lib)
+                                           for k in manifest["kernels"]}
+
+    def __repr__(self) -> str:
+        return (f"<rdsl.Module {self.path or ''} target={self.target} width={self.width} "
+                f"kernels=[{', '.join(self.kernels)}]>")
+
+    def __getitem__(self, name: str) -> Kernel:
+        try:
+            return self.kernels[name]
+        except KeyError:
+            raise KeyError(f"no kernel named `{name}` (kernels: "
+                           f"{', '.join(self.kernels) or 'none'})") from None
+
+    def __contains__(self, name: str) -> bool:
+        return name in self.kernels
+
+    def __iter__(self):
+        return iter(self.kernels)
+
+    def _lookup(self, name: str) -> Any:
+        if name in self.kernels:
+            return self.kernels[name]
+        if any(k.startswith(name + ".") for k in self.kernels):
+            return _Namespace(self, name)
+        raise AttributeError(f"module has no kernel `{name}` (kernels: "
+                             f"{', '.join(self.kernels) or 'none'})")
+
+    def __getattr__(self, name: str) -> Any:
+        if name.startswith("_") or "kernels" not in self.__dict__:
+            raise AttributeError(name)
+        return self._lookup(name)
+
+    def __dir__(self) -> list[str]:
+        return sorted(set(super().__dir__()) | {k.split(".")[0] for k in self.kernels})
+
+
+def _resolve(path: str | os.PathLike) -> tuple[Path, Path]:
+    p = Path(path)
+    if p.suffix in (".so", ".json", ".h"):
+        stem = p.with_suffix("")
+    else:
+        stem = p
+    return stem.with_name(stem.name + ".so"), stem.with_name(stem.name + ".json")
+
+
+def load(path: str | os.PathLike, *, from_cache: bool = False,
+         compile_seconds: float = 0.0) -> Module:
+    """Load a compiled library: ``path`` is the ``.so``, the ``.json`` manifest or their stem."""
+    from ..compiler.targets import get_target, host_supports
+
+    so, man = _resolve(path)
+    if not man.is_file() or not so.is_file():
+        missing = man if not man.is_file() else so
+        raise FileNotFoundError(f"no compiled rdsl module at `{path}` (missing {missing})")
+    try:
+        manifest = json.loads(man.read_text())
+        target = manifest["target"]
+        manifest["kernels"]
+    except (OSError, ValueError, KeyError, TypeError) as e:
+        raise CompileError(f"{man}: not a valid rdsl manifest ({e})") from None
+    try:
+        runnable = host_supports(get_target(target))
+    except CompileError:
+        runnable = True  # a target this version does not know: let the loader decide
+    if not runnable:
+        raise RuntimeError(f"{so} was compiled for target `{target}`, which this CPU cannot "
+                           "run; recompile with --target host")
+    try:
+        lib = _dlopen(so)
+    except OSError as e:
+        raise CompileError(f"cannot load {so}: {e}") from None
+    return Module(manifest, lib, so, from_cache=from_cache, compile_seconds=compile_seconds)
+
+
+def _source_text(source_or_path: str | os.PathLike) -> str:
+    if isinstance(source_or_path, os.PathLike) or "\n" not in source_or_path and (source_or_path.endswith(".rdsl")
+                                         or Path(source_or_path).is_file()):
+        p = Path(source_or_path)
+    else:
+        return source_or_path
+    try:
+        return p.read_text()
+    except OSError as e:
+        raise CompileError(f"cannot read `{p}`: {e.strerror or e}") from None
+
+
+def jit(source_or_path: str | os.PathLike, target: str = "host", variant: str = "rgb",
+        cache: bool = True, **options: Any) -> Module:
+    """Compile ``source_or_path`` (a ``.rdsl`` path or source text) for ``target`` and load it.
+
+    The library is cached under :func:`rdsl.runtime.cache.cache_dir`; a second call with the
+    same sources (imports included), target, variant and options loads it without compiling.
+    ``options`` are passed on to ``rdsl.compiler.driver.compile_kernels``."""
+    from ..compiler import driver
+    from ..compiler.backends.clib import build_library
+    from ..compiler.targets import get_target
+
+    t0 = time.perf_counter()
+    tgt = get_target(target)
+    text = _source_text(source_or_path)
+    files = [Path(f) for f in driver.source_files(source_or_path)]
+    key = cache_key(text, files, tgt.name, variant, tgt.width, options)
+    root = cache_dir()
+    entry = root / key
+    if cache and entry_complete(entry):
+        return load(entry / STEM, from_cache=True, compile_seconds=time.perf_counter() - t0)
+
+    module, _ = driver.compile_kernels(source_or_path, target=tgt.name, variant=variant,
+                                       **options)
+    if not cache:
+        tmp = Path(tempfile.mkdtemp(prefix="rdsl-jit-"))
+        atexit.register(shutil.rmtree, tmp, True)
+        build_library(module, tgt, tmp, STEM)
+        return load(tmp / STEM, compile_seconds=time.perf_counter() - t0)
+    try:
+        root.mkdir(parents=True, exist_ok=True)
+        tmp = Path(tempfile.mkdtemp(prefix=f".{key[:16]}-", dir=root))
+    except OSError as e:
+        raise CompileError(f"cannot write to the kernel cache `{root}`: {e.strerror or e} "
+                           "(set $RDSL_CACHE_DIR)") from None
+    try:
+        build_library(module, tgt, tmp, STEM)
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise
+    try:
+        os.rename(tmp, entry)  # atomic: readers see a complete entry or none
+    except OSError:
+        # another process installed the same entry first (or a broken one is in the way)
+        if not entry_complete(entry):
+            shutil.rmtree(entry, ignore_errors=True)
+            try:
+                os.rename(tmp, entry)
+            except OSError:
+                pass
+        if tmp.exists():
+            if entry_complete(entry):
+                shutil.rmtree(tmp, ignore_errors=True)
+            else:
+                entry = tmp
+    return load(entry / STEM, compile_seconds=time.perf_counter() - t0)

@@ -1,0 +1,71 @@
+"""The on-disk kernel cache: ``$RDSL_CACHE_DIR`` (default ``~/.cache/rdsl``)/``<key>/``.
+
+The key hashes everything the compiled code depends on: the source text, the text of every
+file it imports (stdlib included), the target, variant and width, compiler options, the rdsl
+version and a fingerprint of the compiler's own code."""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+from collections.abc import Iterable
+from functools import lru_cache
+from pathlib import Path
+from typing import Any
+
+STEM = "kernels"  # file names inside a cache entry: kernels.so, kernels.h, kernels.json
+
+
+def cache_dir() -> Path:
+    """The root of the kernel cache."""
+    env = os.environ.get("RDSL_CACHE_DIR")
+    if env:
+        return Path(env).expanduser()
+    return Path.home() / ".cache" / "rdsl"
+
+
+@lru_cache(maxsize=1)
+def compiler_fingerprint() -> str:
+    """A hash of the compiler's Python sources and grammar, so a changed compiler misses."""
+    root = Path(__file__).resolve().parent.parent
+    h = hashlib.sha256()
+    for sub in ("compiler", "dsl"):
+        for p in sorted((root / sub).rglob("*")):
+            if p.suffix in (".py", ".lark") and p.is_file():
+                h.update(str(p.relative_to(root)).encode())
+                h.update(p.read_bytes())
+    return h.hexdigest()
+
+
+def cache_key(source_text: str, files: Iterable[os.PathLike | str], target: str,
+              variant: str | None, width: int, options: dict[str, Any]) -> str:
+    """The sha256 key of one compilation."""
+    from .. import __version__
+
+    h = hashlib.sha256()
+
+    def part(tag: str, data: bytes | str) -> None:
+        b = data.encode() if isinstance(data, str) else data
+        h.update(f"{tag}:{len(b)}:".encode())
+        h.update(b)
+
+    part("version", __version__)
+    part("compiler", compiler_fingerprint())
+    part("target", target)
+    part("variant", str(variant))
+    part("width", str(width))
+    part("options", json.dumps(options, sort_keys=True, default=repr))
+    part("source", source_text)
+    for f in files:
+        p = Path(f)
+        part("file", str(p))
+        try:
+            part("text", p.read_bytes())
+        except OSError:
+            part("text", "<missing>")
+    return h.hexdigest()
+
+
+def entry_complete(d: Path) -> bool:
+    return all((d / f"{STEM}{s}").is_file() for s in (".so", ".json"))

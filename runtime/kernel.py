@@ -1,0 +1,356 @@
+"""A compiled kernel callable from Python: numpy arrays in, numpy arrays out.
+
+The manifest (written by :mod:`rdsl.compiler.backends.clib`) describes each kernel's
+source-level params (scalar, vec, mat, struct, tuple, buffer), their flat leaves, and the
+flat C arguments of its entry points.  :class:`Kernel` converts between the two.
+"""
+
+from __future__ import annotations
+
+import ctypes
+import math
+import numbers
+import os
+from concurrent.futures import ThreadPoolExecutor
+from typing import Any
+
+import numpy as np
+
+DTYPES = {"f32": np.dtype(np.float32), "i32": np.dtype(np.int32),
+          "u32": np.dtype(np.uint32), "u64": np.dtype(np.uint64), "bool": np.dtype(np.bool_)}
+_C_DTYPES = {**DTYPES, "bool": np.dtype(np.uint8)}  # how each dtype is laid out in C
+_CTYPES = {"f32": ctypes.c_float, "i32": ctypes.c_int32, "u32": ctypes.c_uint32,
+           "u64": ctypes.c_uint64, "bool": ctypes.c_uint8}
+# numpy dtype kinds accepted for each leaf dtype (anything else is a ValueError)
+_KINDS = {"f32": "fiu", "i32": "iu", "u32": "iu", "u64": "iu", "bool": "biu"}
+_NAMES = {"f32": "float32", "i32": "int32", "u32": "uint32", "u64": "uint64", "bool": "bool"}
+
+MIN_CHUNK = 4096  # elements per thread-pool task, at least
+CHUNKS_PER_THREAD = 16
+
+
+def _shape_desc(tj: dict[str, Any]) -> str:
+    kind = tj["kind"]
+    if kind == "vec":
+        return f"(N, {tj['n']})"
+    if kind == "mat":
+        return f"(N, {tj['n']}, {tj['n']})"
+    return "(N,)"
+
+
+class Kernel:
+    """One compiled kernel.  Call it with arrays (see ``__call__``); ``signature`` shows how."""
+
+    def __init__(self, module: Any, info: dict[str, Any], lib: ctypes.CDLL) -> None:
+        self.module = module
+        self.info = info
+        self.name: str = info["name"]
+        self.width: int = module.width
+        self.params: list[dict[str, Any]] = info["params"]
+        self.result: dict[str, Any] = info["result"]
+        self.args: list[dict[str, Any]] = info["args"]
+        self._arg_index = {a["name"]: i for i, a in enumerate(self.args)}
+        self._positional = [p for p in self.params
+                            if not p["uniform"] or p["type"]["kind"] == "buffer"]
+        self._uniform = {p["name"]: p for p in self.params
+                         if p["uniform"] and p["type"]["kind"] != "buffer"}
+        argtypes = [ctypes.c_void_p if a["kind"] != "uniform" else _CTYPES[a["dtype"]]
+                    for a in self.args] + [ctypes.c_void_p]
+        self._fn = getattr(lib, info["symbol"])
+        self._fn.argtypes = [ctypes.c_int64] + argtypes
+        self._fn.restype = None
+        self._range = getattr(lib, info["range_symbol"])
+        self._range.argtypes = [ctypes.c_int64, ctypes.c_int64] + argtypes
+        self._range.restype = None
+
+    def __repr__(self) -> str:
+        return f"<rdsl.Kernel {self.signature}>"
+
+    @property
+    def signature(self) -> str:
+        pos = [p["name"] for p in self._positional]
+        kw = [f"{n}={p.get('default')!r}" for n, p in self._uniform.items()]
+        return f"{self.name}({', '.join(pos + kw + ['mask=None', 'threads=None'])})"
+
+    # -- argument conversion -------------------------------------------------------------
+    def _err(self, msg: str) -> ValueError:
+        return ValueError(f"{self.name}(): {msg}")
+
+    def _leaf_array(self, path: str, value: Any, dtype: str, tj: dict[str, Any]) -> Any:
+        """Check one leaf's array-like (or Python scalar); return an ndarray or a scalar."""
+        want = f"expects a {_NAMES[dtype]} array of shape {_shape_desc(tj)}"
+        if isinstance(value, (np.ndarray, list, tuple)) or hasattr(value, "__array__"):
+            arr = np.asarray(value)
+            if arr.dtype.kind not in _KINDS[dtype]:
+                raise self._err(f"parameter `{path}` {want}, got dtype {arr.dtype}")
+            if arr.ndim == 0:
+                return arr.item()
+            if arr.ndim != 1:
+                raise self._err(f"parameter `{path}` {want}, got shape {arr.shape}")
+            return arr
+        return self._scalar(path, value, dtype, want)
+
+    def _scalar(self, path: str, value: Any, dtype: str, want: str) -> Any:
+        if isinstance(value, (bool, np.bool_)):
+            ok = dtype in ("bool", "f32") or isinstance(value, numbers.Integral)
+        elif isinstance(value, numbers.Integral):
+            ok = True
+        elif isinstance(value, numbers.Real):
+            ok = dtype == "f32"
+        else:
+            ok = False
+        if not ok:
+            raise self._err(f"parameter `{path}` {want}, got {type(value).__name__}")
+        return value
+
+    def _flatten_varying(self, path: str, value: Any, tj: dict[str, Any],
+                         out: list[Any]) -> None:
+        """Append the leaf arrays of a varying param (per its type JSON) to ``out``."""
+        kind = tj["kind"]
+        if kind == "scalar":
+            out.append((path, self._leaf_array(path, value, tj["dtype"], tj)))
+        elif kind in ("vec", "mat"):
+            k = tj["n"] if kind == "vec" else tj["n"] * tj["n"]
+            dtype = tj["dtype"]
+            want = f"expects a {_NAMES[dtype]} array of shape {_shape_desc(tj)}"
+            if isinstance(value, (list, tuple)) and len(value) == k and \
+                    all(isinstance(v, numbers.Real) for v in value):
+                for v in value:  # one value for every lane
+                    out.append((path, self._scalar(path, v, dtype, want)))
+                return
+            arr = np.asarray(value)
+            if arr.dtype.kind not in _KINDS[dtype]:
+                raise self._err(f"parameter `{path}` {want}, got dtype {arr.dtype}")
+            if kind == "mat" and arr.ndim == 3 and arr.shape[1:] == (tj["n"], tj["n"]):
+                arr = arr.reshape(arr.shape[0], k)
+            if arr.ndim != 2 or arr.shape[1] != k:
+                raise self._err(f"parameter `{path}` {want}, got shape {arr.shape}")
+            for j in range(k):
+                out.append((path, arr[:, j]))
+        elif kind == "struct":
+            if not isinstance(value, dict):
+                raise self._err(f"parameter `{path}` expects a dict of fields "
+                                f"({', '.join(f for f, _ in tj['fields'])}), "
+                                f"got {type(value).__name__}")
+            names = [f for f, _ in tj["fields"]]
+            extra = set(value) - set(names)
+            if extra:
+                raise self._err(f"parameter `{path}` has no field `{sorted(extra)[0]}` "
+                                f"(fields: {', '.join(names)})")
+            for fname, ft in tj["fields"]:
+                if fname not in value:
+                    raise self._err(f"parameter `{path}` is missing field `{fname}`")
+                self._flatten_varying(f"{path}.{fname}", value[fname], ft, out)
+        elif kind == "tuple":
+            elems = tj["elems"]
+            if not isinstance(value, (list, tuple)) or len(value) != len(elems):
+                raise self._err(f"parameter `{path}` expects a tuple of {len(elems)} values")
+            for i, (v, et) in enumerate(zip(value, elems)):
+                self._flatten_varying(f"{path}.{i}", v, et, out)
+        else:
+            raise self._err(f"parameter `{path}` has unsupported type {tj}")
+
+    def _flatten_uniform(self, path: str, value: Any, tj: dict[str, Any],
+                         out: list[Any]) -> None:
+        kind = tj["kind"]
+        if kind == "scalar":
+            dtype = tj["dtype"]
+            if isinstance(value, np.ndarray) and value.size == 1:
+                value = value.reshape(()).item()
+            elif isinstance(value, (list, tuple)) and len(value) == 1:
+                value = value[0]  # a one-component spectrum
+            out.append(self._scalar(path, value, dtype, f"expects a {_NAMES[dtype]} value"))
+        elif kind in ("vec", "mat"):
+            k = tj["n"] if kind == "vec" else tj["n"] * tj["n"]
+            vals = np.asarray(value).reshape(-1).tolist() \
+                if isinstance(value, (list, tuple, np.ndarray)) else [value]
+            if len(vals) == 1 and k > 1:
+                vals = vals * k  # `0.5` where a vector/spectrum is expected
+            if len(vals) != k:
+                raise self._err(f"parameter `{path}` expects {k} values, got {len(vals)}")
+            for v in vals:
+                out.append(self._scalar(path, v, tj["dtype"],
+                                        f"expects {_NAMES[tj['dtype']]} values"))
+        elif kind == "struct":
+            if not isinstance(value, dict):
+                raise self._err(f"parameter `{path}` expects a dict of fields")
+            for fname, ft in tj["fields"]:
+                if fname not in value:
+                    raise self._err(f"parameter `{path}` is missing field `{fname}`")
+                self._flatten_uniform(f"{path}.{fname}", value[fname], ft, out)
+        elif kind == "tuple":
+            if not isinstance(value, (list, tuple)) or len(value) != len(tj["elems"]):
+                raise self._err(f"parameter `{path}` expects a tuple of "
+                                f"{len(tj['elems'])} values")
+            for i, (v, et) in enumerate(zip(value, tj["elems"])):
+                self._flatten_uniform(f"{path}.{i}", v, et, out)
+        else:
+            raise self._err(f"parameter `{path}` has unsupported type {tj}")
+
+    def _buffer(self, p: dict[str, Any], value: Any) -> np.ndarray:
+        dtype = p["type"]["dtype"]
+        want = _C_DTYPES[dtype]
+        if not isinstance(value, np.ndarray):
+            raise self._err(f"buffer parameter `{p['name']}` expects a numpy array of "
+                            f"{want.name}, got {type(value).__name__}")
+        if value.dtype != want or not value.flags.c_contiguous or not value.flags.writeable:
+            raise self._err(f"buffer parameter `{p['name']}` expects a writeable C-contiguous "
+                            f"{want.name} array (it is updated in place), got "
+                            f"{value.dtype}{'' if value.flags.c_contiguous else ' (strided)'}")
+        return value
+
+    # -- calling -------------------------------------------------------------------------
+    def __call__(self, *args: Any, mask: Any = None, threads: int | None = None,
+                 **kwargs: Any) -> Any:
+        """Run the kernel over arrays.
+
+        Positional arguments are the source-level varying params and the buffers, in order
+        (they may also be given by keyword); uniform params are keywords (defaults from the
+        manifest).  Returns a (N,) array, a (N, k) array for vectors, a dict for structs, a
+        tuple for tuples, or None."""
+        pos = self._positional
+        if len(args) > len(pos):
+            raise self._err(f"expected {len(pos)} positional arguments "
+                            f"({', '.join(p['name'] for p in pos)}), got {len(args)}")
+        values: dict[str, Any] = {p["name"]: a for p, a in zip(pos, args)}
+        for k, v in kwargs.items():
+            if k in values:
+                raise self._err(f"got multiple values for parameter `{k}`")
+            if k not in self._uniform and k not in {p["name"] for p in pos}:
+                raise self._err(f"unexpected keyword argument `{k}` (uniform parameters: "
+                                f"{', '.join(self._uniform) or 'none'})")
+            values[k] = v
+        missing = [p["name"] for p in pos if p["name"] not in values]
+        if missing:
+            raise self._err(f"missing argument for parameter `{missing[0]}` (expected "
+                            f"{', '.join(p['name'] for p in pos)})")
+
+        c_vals: list[Any] = [None] * len(self.args)
+        leaves: list[tuple[str, Any]] = []
+        leaf_slots: list[int] = []
+        for p in self.params:
+            name, tj = p["name"], p["type"]
+            if tj["kind"] == "buffer":
+                slot = self._arg_index[p["leaves"][0] if p.get("leaves") else name]
+                c_vals[slot] = self._buffer(p, values[name])
+                continue
+            if p["uniform"]:
+                value = values.get(name, p.get("default"))
+                if value is None:
+                    raise self._err(f"missing value for uniform parameter `{name}` "
+                                    "(it has no default)")
+                flat: list[Any] = []
+                self._flatten_uniform(name, value, tj, flat)
+                for leaf, v in zip(p["leaves"], flat):
+                    dt = self.args[self._arg_index[leaf]]["dtype"]
+                    c_vals[self._arg_index[leaf]] = _CTYPES[dt](_c_scalar(v, dt))
+                continue
+            flat_v: list[tuple[str, Any]] = []
+            self._flatten_varying(name, values[name], tj, flat_v)
+            for leaf, item in zip(p["leaves"], flat_v):
+                leaves.append(item)
+                leaf_slots.append(self._arg_index[leaf])
+
+        # n from the first array; every array must agree
+        n, n_from = None, None
+        for path, v in leaves:
+            if isinstance(v, np.ndarray):
+                if n is None:
+                    n, n_from = len(v), path
+                elif len(v) != n:
+                    raise self._err(f"parameter `{path}` has {len(v)} elements, expected {n} "
+                                    f"(the length of `{n_from}`)")
+        if mask is not None:
+            m = np.asarray(mask)
+            if m.ndim != 1 or m.dtype.kind not in "biu":
+                raise self._err(f"`mask` expects a bool array of shape (N,), got "
+                                f"{m.dtype} array of shape {m.shape}")
+            if n is None:
+                n, n_from = len(m), "mask"
+            elif len(m) != n:
+                raise self._err(f"`mask` has {len(m)} elements, expected {n}")
+            mask_arr = np.ascontiguousarray(m != 0 if m.dtype.kind != "b" else m)
+            mask_arr = mask_arr.view(np.uint8)
+        if n is None:
+            n = 1
+        keep = []
+        for (path, v), slot in zip(leaves, leaf_slots):
+            dt = self.args[slot]["dtype"]
+            if isinstance(v, np.ndarray):
+                a = v != 0 if dt == "bool" and v.dtype.kind != "b" else v
+                a = np.ascontiguousarray(a, dtype=DTYPES[dt])
+            else:
+                a = np.full(n, v, dtype=DTYPES[dt])
+            keep.append(a)
+            c_vals[slot] = a.ctypes.data
+
+        outs = [(i, a) for i, a in enumerate(self.args) if a["kind"] == "output"]
+        alloc = np.zeros if mask is not None else np.empty
+        out_arrays = {}
+        for i, a in outs:
+            arr = alloc(n, dtype=_C_DTYPES[a["dtype"]])
+            out_arrays[a["name"]] = arr
+            c_vals[i] = arr.ctypes.data
+        for i, a in enumerate(self.args):
+            if a["kind"] == "buffer":
+                c_vals[i] = c_vals[i].ctypes.data
+        mask_ptr = mask_arr.ctypes.data if mask is not None else None
+
+        self._run(n, c_vals, mask_ptr, threads)
+        del keep
+        return self._results(out_arrays, n)
+
+    def _run(self, n: int, c_vals: list[Any], mask_ptr: Any, threads: int | None) -> None:
+        if n <= 0:
+            return
+        threads = (os.cpu_count() or 1) if threads is None else max(1, int(threads))
+        if threads == 1 or n < 2 * MIN_CHUNK:
+            self._fn(n, *c_vals, mask_ptr)
+            return
+        W = max(self.width, 1)
+        chunk = max(MIN_CHUNK, math.ceil(n / (threads * CHUNKS_PER_THREAD)))
+        chunk = (chunk + W - 1) // W * W
+        bounds = [(b, min(b + chunk, n)) for b in range(0, n, chunk)]
+        with ThreadPoolExecutor(max_workers=min(threads, len(bounds))) as pool:
+            futures = [pool.submit(self._range, b, e, *c_vals, mask_ptr) for b, e in bounds]
+            for f in futures:
+                f.result()
+
+    def _results(self, out_arrays: dict[str, np.ndarray], n: int) -> Any:
+        tj = self.result.get("type")
+        if tj is None:
+            return None
+        leaves = iter(self.result["leaves"])
+
+        def take(dtype: str) -> np.ndarray:
+            arr = out_arrays[next(leaves)]
+            return arr.view(np.bool_) if dtype == "bool" else arr
+
+        def build(t: dict[str, Any]) -> Any:
+            kind = t["kind"]
+            if kind == "scalar":
+                return take(t["dtype"])
+            if kind in ("vec", "mat"):
+                k = t["n"] if kind == "vec" else t["n"] * t["n"]
+                cols = [take(t["dtype"]) for _ in range(k)]
+                out = np.stack(cols, axis=1)
+                return out.reshape(n, t["n"], t["n"]) if kind == "mat" else out
+            if kind == "struct":
+                return {f: build(ft) for f, ft in t["fields"]}
+            if kind == "tuple":
+                return tuple(build(e) for e in t["elems"])
+            raise TypeError(t)
+
+        return build(tj)
+
+
+def _c_scalar(v: Any, dtype: str) -> Any:
+    if dtype == "f32":
+        return float(v)
+    if dtype == "bool":
+        return 1 if v else 0
+    bits = 64 if dtype == "u64" else 32
+    iv = int(v) & ((1 << bits) - 1)
+    if dtype == "i32" and iv >= 1 << 31:
+        iv -= 1 << 32
+    return iv

@@ -1,0 +1,265 @@
+"""The Python runtime: argument conversion, structured params and results, errors, threads,
+``rdsl.load`` and the ``rdsl.jit`` disk cache."""
+
+from __future__ import annotations
+
+import json
+import sys
+import types
+from pathlib import Path
+
+import numpy as np
+import pytest
+import rdsl
+from _backend_util import add_kernel, build_and_load, new_module, vt
+from rdsl.compiler import ir
+from rdsl.compiler.targets import host_target
+
+Op = ir.Op
+VEC3 = {"kind": "vec", "n": 3, "dtype": "f32"}
+F32J = {"kind": "scalar", "dtype": "f32"}
+SURF = {"kind": "struct", "name": "Surf", "fields": [
+    ["p", VEC3], ["t", F32J], ["valid", {"kind": "scalar", "dtype": "bool"}]]}
+SAMPLE = {"kind": "struct", "name": "Sample", "fields": [["value", VEC3], ["pdf", F32J]]}
+
+
+def _shading_module(width: int) -> ir.Module:
+    """shade(si: Surf, wo: Vec3; alpha: Float = 0.5, color: Vec3 = (0.2, 0.3, 0.4)) -> Sample
+    value = valid ? wo * color * alpha : 0;  pdf = si.t + si.p.x.   Also lerp(a, b, t)."""
+    m = new_module(width, variant="rgb")
+    W = width
+    f = vt("f32", W)
+    xyz = ("x", "y", "z")
+    params = [(f"si.p.{c}", "f32", "varying") for c in xyz] + [
+        ("si.t", "f32", "varying"), ("si.valid", "bool", "varying")] + [
+        (f"wo.{c}", "f32", "varying") for c in xyz] + [("alpha", "f32", "uniform", 0.5)] + [
+        (f"color.{c}", "f32", "uniform") for c in xyz]
+
+    def shade(b, a, mask):
+        zero = b.op(Op.BROADCAST, f, b.const(0.0, ir.F32))
+        al = b.op(Op.BROADCAST, f, a["alpha"])
+        out = []
+        for c in xyz:
+            v = b.op(Op.MUL, f, b.op(Op.MUL, f, a[f"wo.{c}"],
+                                     b.op(Op.BROADCAST, f, a[f"color.{c}"])), al)
+            out.append(b.op(Op.SELECT, f, a["si.valid"], v, zero))
+        out.append(b.op(Op.ADD, f, a["si.t"], a["si.p.x"]))
+        return out
+    fn = add_kernel(m, "bsdf.shade", params, shade,
+                    ["ret.value.x", "ret.value.y", "ret.value.z", "ret.pdf"])
+    fn.attrs["abi_params"] = [
+        {"name": "si", "type": SURF, "uniform": False, "default": None,
+         "leaves": ["si.p.x", "si.p.y", "si.p.z", "si.t", "si.valid"]},
+        {"name": "wo", "type": VEC3, "uniform": False, "default": None,
+         "leaves": ["wo.x", "wo.y", "wo.z"]},
+        {"name": "alpha", "type": F32J, "uniform": True, "default": 0.5, "leaves": ["alpha"]},
+        {"name": "color", "type": VEC3, "uniform": True, "default": [0.2, 0.3, 0.4],
+         "leaves": ["color.x", "color.y", "color.z"]}]
+    fn.attrs["abi_result"] = {"type": SAMPLE, "leaves": fn.ret_names}
+
+    def lerp(b, a, mask):
+        d = b.op(Op.SUB, f, a["b"], a["a"])
+        return [b.op(Op.ADD, f, a["a"], b.op(Op.MUL, f, a["t"], d))]
+    add_kernel(m, "lerp", [("a", "f32", "varying"), ("b", "f32", "varying"),
+                           ("t", "f32", "varying")], lerp)
+
+    def count(b, a, mask):  # i32 param, tuple result, uniform result
+        i = a["i"]
+        return [b.op(Op.ADD, vt("i32", W), i, i), b.op(Op.ANY, ir.BOOL, mask)]
+    add_kernel(m, "count", [("i", "i32", "varying")], count, ["ret.0", "ret.1"])
+    return m
+
+
+@pytest.fixture(scope="module")
+def mod(tmp_path_factory):
+    t = host_target()
+    return build_and_load(_shading_module(t.width), t.name, tmp_path_factory.mktemp("rt"))
+
+
+def _surf(n, rng):
+    return {"p": rng.standard_normal((n, 3)).astype(np.float32),
+            "t": rng.random(n).astype(np.float32), "valid": rng.random(n) < 0.7}
+
+
+def test_struct_and_vec_params(mod):
+    rng = np.random.default_rng(0)
+    n = 101
+    si, wo = _surf(n, rng), rng.standard_normal((n, 3)).astype(np.float32)
+    res = mod["bsdf.shade"](si, wo, alpha=0.25, color=(1.0, 2.0, 3.0))
+    assert set(res) == {"value", "pdf"}
+    assert res["value"].shape == (n, 3) and res["pdf"].shape == (n,)
+    col = np.array([1, 2, 3], dtype=np.float32)
+    expected = np.where(si["valid"][:, None], wo * col * np.float32(0.25), 0)
+    np.testing.assert_array_equal(res["value"], expected)
+    np.testing.assert_array_equal(res["pdf"], si["t"] + si["p"][:, 0])
+    # defaults from the manifest; a scalar where a vector uniform is expected
+    d = mod.bsdf.shade(si, wo)
+    col = np.array([0.2, 0.3, 0.4], dtype=np.float32)
+    np.testing.assert_array_equal(d["value"], np.where(si["valid"][:, None],
+                                                       wo * col * np.float32(0.5), 0))
+    s = mod.bsdf.shade(si, wo, color=2.0, alpha=1)
+    np.testing.assert_array_equal(s["value"], np.where(si["valid"][:, None], wo * 2, 0))
+
+
+def test_scalars_broadcast_and_keywords(mod):
+    a = np.arange(10, dtype=np.float64)  # converted to float32
+    got = mod.lerp(a, 10.0, 0.5)
+    np.testing.assert_array_equal(got, (a.astype(np.float32) + 10) * np.float32(0.5))
+    np.testing.assert_array_equal(mod.lerp(a=a, b=a, t=[0.0] * 10), a.astype(np.float32))
+    assert mod.lerp(1.0, 3.0, 0.5).tolist() == [2.0]
+
+
+def test_tuple_and_uniform_results(mod):
+    i = np.arange(20, dtype=np.int32)
+    twice, any_ = mod.count(i)
+    np.testing.assert_array_equal(twice, 2 * i)
+    assert any_.dtype == np.bool_ and any_.all()
+    mask = np.zeros(20, dtype=bool)
+    mask[3] = True
+    twice, _ = mod.count(i, mask=mask)
+    assert twice[3] == 6 and (twice[~mask] == 0).all()
+
+
+def test_value_errors(mod):
+    t = np.zeros((5, 2), dtype=np.float32)
+    with pytest.raises(ValueError, match=r"lerp\(\): parameter `t` expects a float32 array of "
+                                         r"shape \(N,\), got shape \(5, 2\)"):
+        mod.lerp(np.zeros(5), np.zeros(5), t)
+    with pytest.raises(ValueError, match=r"count\(\): parameter `i` expects a int32 array .*"
+                                         "got dtype float64"):
+        mod.count(np.zeros(4))
+    with pytest.raises(ValueError, match=r"lerp\(\): parameter `b` expects .*complex"):
+        mod.lerp(np.zeros(3), np.zeros(3, dtype=complex), np.zeros(3))
+    with pytest.raises(ValueError, match=r"lerp\(\): parameter `a` .*object"):
+        mod.lerp(np.array([object()] * 3), np.zeros(3), np.zeros(3))
+    with pytest.raises(ValueError, match=r"lerp\(\): expected 3 positional arguments"):
+        mod.lerp(1, 2, 3, 4)
+    with pytest.raises(ValueError, match=r"lerp\(\): missing argument for parameter `t`"):
+        mod.lerp(1, 2)
+    with pytest.raises(ValueError, match=r"lerp\(\): parameter `b` has 4 elements, "
+                                         r"expected 3 \(the length of `a`\)"):
+        mod.lerp(np.zeros(3), np.zeros(4), 0.5)
+    with pytest.raises(ValueError, match=r"lerp\(\): unexpected keyword argument `alpha`"):
+        mod.lerp(1, 2, 3, alpha=2)
+    rng = np.random.default_rng(1)
+    with pytest.raises(ValueError, match=r"bsdf.shade\(\): parameter `wo` expects a float32 "
+                                         r"array of shape \(N, 3\), got shape \(4, 2\)"):
+        mod["bsdf.shade"](_surf(4, rng), np.zeros((4, 2)))
+    with pytest.raises(ValueError, match=r"parameter `si` is missing field `valid`"):
+        mod["bsdf.shade"]({"p": np.zeros((4, 3)), "t": np.zeros(4)}, np.zeros((4, 3)))
+    with pytest.raises(ValueError, match=r"parameter `color` expects 3 values, got 2"):
+        mod["bsdf.shade"](_surf(4, rng), np.zeros((4, 3)), color=(1, 2))
+    with pytest.raises(ValueError, match=r"`mask` has 2 elements, expected 4"):
+        mod.count(np.zeros(4, dtype=np.int32), mask=[True, False])
+
+
+def test_threads_give_identical_results(mod):
+    rng = np.random.default_rng(2)
+    n = 100_003
+    si, wo = _surf(n, rng), rng.standard_normal((n, 3)).astype(np.float32)
+    mask = rng.random(n) < 0.9
+    one = mod["bsdf.shade"](si, wo, mask=mask, threads=1)
+    many = mod["bsdf.shade"](si, wo, mask=mask, threads=4)
+    for k in one:
+        np.testing.assert_array_equal(one[k], many[k])
+    np.testing.assert_array_equal(mod.lerp(wo[:, 0], wo[:, 1], wo[:, 2], threads=3),
+                                  mod.lerp(wo[:, 0], wo[:, 1], wo[:, 2], threads=1))
+
+
+def test_load_paths_and_module(mod, tmp_path):
+    path = mod.path
+    for p in (path, path.with_suffix(".json"), path.with_suffix("")):
+        m = rdsl.load(str(p))
+        assert set(m.kernels) == {"bsdf.shade", "lerp", "count"}
+    assert m.width == host_target().width and m.variant == "rgb" and not m.from_cache
+    assert "lerp(a, b, t" in m.lerp.signature
+    with pytest.raises(AttributeError, match="no kernel `nope`"):
+        m.nope
+    with pytest.raises(KeyError):
+        m["nope"]
+    with pytest.raises(FileNotFoundError, match="no compiled rdsl module"):
+        rdsl.load(tmp_path / "missing.so")
+    manifest = json.loads(path.with_suffix(".json").read_text())
+    k = next(k for k in manifest["kernels"] if k["name"] == "bsdf.shade")
+    assert k["symbol"] == "rdsl_bsdf_shade" and k["range_symbol"] == "rdsl_bsdf_shade_range"
+    assert manifest["rdsl_version"] == rdsl.__version__
+    assert [a["kind"] for a in k["args"]].count("output") == 4
+    assert k["params"][0]["leaf_dtypes"] == ["f32", "f32", "f32", "f32", "bool"]
+
+
+def test_rebuilt_library_is_reloaded(tmp_path):
+    from rdsl.compiler.backends.clib import build_library
+
+    t = host_target()
+
+    def module(c: float) -> ir.Module:
+        m = new_module(t.width)
+        add_kernel(m, "k", [("x", "f32", "varying")], lambda b, a, mask: [
+            b.op(Op.ADD, vt("f32", t.width), a["x"],
+                 b.op(Op.BROADCAST, vt("f32", t.width), b.const(c, ir.F32)))])
+        return m
+    build_library(module(1.0), t, tmp_path, "lib")
+    assert rdsl.load(tmp_path / "lib.so").k([0.0]).tolist() == [1.0]
+    build_library(module(2.0), t, tmp_path, "lib")
+    assert rdsl.load(tmp_path / "lib.so").k([0.0]).tolist() == [2.0]
+
+
+# --------------------------------------------------------------------------------------
+# rdsl.jit and the cache, with a stand-in for the driver
+
+
+@pytest.fixture
+def fake_driver(monkeypatch, tmp_path):
+    calls = []
+    src = tmp_path / "src"
+    src.mkdir()
+    main, lib = src / "main.rdsl", src / "lib.rdsl"
+    main.write_text("import lib;\nfn lerp(a: Float, b: Float, t: Float) -> Float { ... }\n")
+    lib.write_text("// helpers\n")
+
+    def source_files(source_or_path):
+        return [Path(source_or_path), lib] if Path(str(source_or_path)).exists() else [lib]
+
+    def compile_kernels(source_or_path, target="host", variant="rgb", **options):
+        from rdsl.compiler.targets import get_target
+
+        calls.append((str(source_or_path), target, variant, options))
+        return _shading_module(get_target(target).width), source_files(source_or_path)
+
+    drv = types.ModuleType("rdsl.compiler.driver")
+    drv.source_files, drv.compile_kernels = source_files, compile_kernels
+    monkeypatch.setitem(sys.modules, "rdsl.compiler.driver", drv)
+    import rdsl.compiler
+
+    monkeypatch.setattr(rdsl.compiler, "driver", drv, raising=False)
+    monkeypatch.setenv("RDSL_CACHE_DIR", str(tmp_path / "cache"))
+    return types.SimpleNamespace(calls=calls, main=main, lib=lib, cache=tmp_path / "cache")
+
+
+def test_jit_cache_hit(fake_driver):
+    m1 = rdsl.jit(fake_driver.main, target="host")
+    assert not m1.from_cache and len(fake_driver.calls) == 1
+    assert m1.compile_seconds > 0
+    m2 = rdsl.jit(str(fake_driver.main), target="host")
+    assert m2.from_cache and len(fake_driver.calls) == 1
+    np.testing.assert_array_equal(m2.lerp([0.0, 1.0], 2.0, 0.5), [1.0, 1.5])
+    entries = [p for p in fake_driver.cache.iterdir() if not p.name.startswith(".")]
+    assert len(entries) == 1 and (entries[0] / "kernels.h").is_file()
+    # a changed import, another variant or another target recompiles
+    fake_driver.lib.write_text("// helpers, edited\n")
+    assert not rdsl.jit(fake_driver.main).from_cache
+    assert not rdsl.jit(fake_driver.main, variant="mono").from_cache
+    assert not rdsl.jit(fake_driver.main, target="scalar").from_cache
+    assert len(fake_driver.calls) == 4
+    assert fake_driver.calls[-1][1:3] == ("scalar", "rgb")
+    assert rdsl.jit(fake_driver.main, target="scalar").from_cache
+    # cache=False compiles again and leaves the cache alone
+    assert not rdsl.jit(fake_driver.main, cache=False).from_cache
+    assert len(fake_driver.calls) == 5
+
+
+def test_jit_source_text(fake_driver):
+    text = "fn lerp(a: Float, b: Float, t: Float) -> Float { return a; }\n"
+    assert not rdsl.jit(text).from_cache
+    assert rdsl.jit(text).from_cache
+    assert not rdsl.jit(text + "\n").from_cache
