@@ -7,7 +7,6 @@ error naming the pass.
 
 from __future__ import annotations
 
-import re
 import sys
 from collections.abc import Callable
 from pathlib import Path
@@ -15,6 +14,7 @@ from typing import TextIO
 
 from .diagnostics import CompileError
 from .ir import Module
+from .sources import PRELUDE, STDLIB, is_path, source_files  # noqa: F401 (re-exported)
 from .passes import Pass
 from .passes.inline import Inline
 from .passes.lift import Lift
@@ -22,8 +22,6 @@ from .passes.optimize import Optimize
 from .passes.scalarize import Scalarize
 from .passes.vectorize import Vectorize
 
-STDLIB = Path(__file__).resolve().parent.parent / "stdlib"
-PRELUDE = ("types", "math")
 
 
 class InternalError(Exception):
@@ -100,41 +98,3 @@ def compile_kernels(source_or_path: str | Path, target: str = "host", variant: s
     run_passes(module, pipeline(variant, tgt.width))
     module.attrs["target"] = tgt.name
     return module, source_files(source_or_path)
-
-
-def is_path(source_or_path: str | Path) -> bool:
-    if isinstance(source_or_path, Path):
-        return True
-    s = str(source_or_path)
-    return "\n" not in s and (s.endswith(".rdsl") or Path(s).is_file())
-
-
-def source_files(source_or_path: str | Path) -> list[Path]:
-    """The main file (if any), everything it imports, and the prelude, resolved the way the
-    frontend resolves imports.  Used to key the kernel cache."""
-    files: list[Path] = []
-    seen: set[Path] = set()
-
-    def visit(path: Path) -> None:
-        path = path.resolve()
-        if path in seen or not path.is_file():
-            return
-        seen.add(path)
-        files.append(path)
-        scan(path.read_text(errors="replace"), path.parent)
-
-    def scan(text: str, folder: Path) -> None:
-        for m in re.finditer(r"^\s*import\s+([A-Za-z_][\w.]*)\s*;", text, re.MULTILINE):
-            rel = Path(*m.group(1).split(".")).with_suffix(".rdsl")
-            for base in (folder, STDLIB):
-                if (base / rel).is_file():
-                    visit(base / rel)
-                    break
-
-    if is_path(source_or_path):
-        visit(Path(source_or_path))
-    else:
-        scan(str(source_or_path), Path.cwd())
-    for name in PRELUDE:
-        visit(STDLIB / f"{name}.rdsl")
-    return files

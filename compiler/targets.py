@@ -54,9 +54,23 @@ TARGETS: dict[str, Target] = {
 _PREFERENCE = ("avx512", "avx2", "sse4", "scalar")
 
 
+# /proc/cpuinfo spells a few features differently from LLVM
+_CPUINFO_TO_LLVM = {"sse4_1": "sse4.1", "sse4_2": "sse4.2", "pni": "sse3"}
+
+
 @lru_cache(maxsize=1)
 def host_features() -> frozenset[str]:
     """The CPU features of this machine (LLVM names), or an empty set if unknown."""
+    # /proc/cpuinfo is read in microseconds; importing llvmlite costs tens of milliseconds,
+    # which matters on the cached-kernel path
+    try:
+        with open("/proc/cpuinfo") as f:
+            for line in f:
+                if line.startswith("flags"):
+                    flags = set(line.split(":", 1)[1].split())
+                    return frozenset(_CPUINFO_TO_LLVM.get(x, x) for x in flags)
+    except OSError:
+        pass
     try:
         import llvmlite.binding as llvm
 

@@ -162,19 +162,21 @@ def jit(source_or_path: str | os.PathLike, target: str = "host", variant: str = 
     The library is cached under :func:`rdsl.runtime.cache.cache_dir`; a second call with the
     same sources (imports included), target, variant and options loads it without compiling.
     ``options`` are passed on to ``rdsl.compiler.driver.compile_kernels``."""
-    from ..compiler import driver
-    from ..compiler.backends.clib import build_library
+    from ..compiler.sources import source_files
     from ..compiler.targets import get_target
 
     t0 = time.perf_counter()
     tgt = get_target(target)
     text = _source_text(source_or_path)
-    files = [Path(f) for f in driver.source_files(source_or_path)]
+    files = [Path(f) for f in source_files(source_or_path)]
     key = cache_key(text, files, tgt.name, variant, tgt.width, options)
     root = cache_dir()
     entry = root / key
     if cache and entry_complete(entry):
         return load(entry / STEM, from_cache=True, compile_seconds=time.perf_counter() - t0)
+
+    from ..compiler import driver  # only now: a cache hit never imports the compiler
+    from ..compiler.backends.clib import build_library
 
     module, _ = driver.compile_kernels(source_or_path, target=tgt.name, variant=variant,
                                        **options)

@@ -261,13 +261,27 @@ def _lower_cast(lw: Lowering, ins: ir.Instr) -> L.Value:
     if src.name == "bool":
         return b.uitofp(a, dty) if dst.is_float else b.zext(a, dty)
     if src.is_float:  # -> int: truncate toward zero, saturate, NaN -> 0
-        kind = "fptosi" if dst.is_signed else "fptoui"
-        return lw.call(f"llvm.{kind}.sat.{mangle(dty)}.{mangle(a.type)}", dty, a)
+        return _saturating_fptoint(lw, a, dst, dty)
     if dst.is_float:
         return b.sitofp(a, dty) if src.is_signed else b.uitofp(a, dty)
     if dst.bits > src.bits:
         return b.sext(a, dty) if src.is_signed else b.zext(a, dty)
     return b.trunc(a, dty)
+
+
+def _saturating_fptoint(lw: Lowering, a: L.Value, dst: ir.ScalarType, dty: L.Type) -> L.Value:
+    """``llvm.fpto[su]i.sat`` spelled as clamp + convert + select: the intrinsic is
+    scalarized on vectors by LLVM, this form stays in vector registers."""
+    b = lw.b
+    lo = -(2.0 ** (dst.bits - 1)) if dst.is_signed else 0.0
+    hi = 2.0 ** (dst.bits - 1) if dst.is_signed else 2.0 ** dst.bits
+    below_hi = hi * (1.0 - 2.0 ** -24)  # the largest f32 under hi
+    top = (1 << (dst.bits - 1)) - 1 if dst.is_signed else (1 << dst.bits) - 1
+    x = b.select(b.fcmp_ordered(">", a, const(a.type, below_hi)), const(a.type, below_hi), a)
+    x = b.select(b.fcmp_ordered("<", x, const(a.type, lo)), const(a.type, lo), x)
+    x = b.select(b.fcmp_unordered("uno", x, x), const(a.type, 0.0), x)
+    r = b.fptosi(x, dty) if dst.is_signed else b.fptoui(x, dty)
+    return b.select(b.fcmp_ordered(">=", a, const(a.type, hi)), const(dty, top), r)
 
 
 def _lower_bitcast(lw: Lowering, ins: ir.Instr) -> L.Value:
