@@ -281,30 +281,14 @@ class _Loader:
                   f"the importing file and in the stdlib)", imp.loc)
 
 
-_prelude_ok: dict[tuple, bool] = {}
-
 
 def _prelude() -> list[Path]:
-    """The implicitly imported stdlib files that exist and check on their own."""
+    """The implicitly imported stdlib files."""
     types = STDLIB / "types.rdsl"
     math = STDLIB / "math.rdsl"
-    out = [types] if types.is_file() else []
-    if math.is_file():
-        # TODO(lead): math.rdsl is being written in parallel; until it is stable, a math.rdsl
-        # that does not parse or check is skipped silently instead of breaking every program.
-        key = (math.stat().st_mtime_ns, types.stat().st_mtime_ns if types.is_file() else 0)
-        if key not in _prelude_ok:
-            try:
-                loader = _Loader([])
-                for p in out + [math]:
-                    loader.load_path(p).prelude = True
-                _Checker(loader.order, "<prelude>").run()
-                _prelude_ok[key] = True
-            except CompileError:
-                _prelude_ok[key] = False
-        if _prelude_ok[key]:
-            out.append(math)
-    return out
+    # Both are part of the package; a broken prelude is an rdsl bug, and it is reported as
+    # a diagnostic in the prelude file rather than skipped, so nothing half-works silently.
+    return [p for p in (types, math) if p.is_file()]
 
 
 def check_program(source: str, filename: str, search_paths: list[Path] | None = None,
