@@ -1,0 +1,521 @@
+"""From the XML object tree to a :class:`SceneDescription` the renderer can use.
+
+Each object is checked against :mod:`.schema`: an unknown plugin, an unknown parameter, a
+value of the wrong kind or a missing required parameter is a :class:`SceneError` naming the
+file, the line, the plugin and what it accepts.  Parameters not given take Mitsuba 3's
+defaults, and derived values are resolved here (conductor ``material`` to ``eta``/``k``,
+``alpha`` to ``alpha_u``/``alpha_v``, the camera's field of view to ``fov_x``, the film's
+crop window).  Shapes carry their triangle mesh in world space.  Nothing is half-loaded: the
+first error stops the load.
+"""
+
+from __future__ import annotations
+
+import math
+import warnings
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ...compiler.ir import Loc
+from . import meshes
+from . import transform as xf
+from .errors import scene_error
+from .meshes import Mesh, MeshError
+from .schema import (
+    AOV_TYPES,
+    BITMAP_FORMATS,
+    KIND_ACCEPTS,
+    REQUIRED,
+    SCENE_CHILDREN,
+    Param,
+    PluginSpec,
+    plugin_types,
+    spec_for,
+)
+from .spectra import Color, conductor_ior, lookup_ior
+from .xml import Child, ObjectNode, Prop, SceneTree, read_scene
+
+_KIND_NAMES = {"float": "a float", "integer": "an integer", "boolean": "a boolean",
+               "string": "a string", "point": "a point", "vector": "a vector",
+               "transform": "a transform", "color": "a color (float, rgb, spectrum or texture)",
+               "ftex": "a float or a texture", "ior": "a float or a named IOR string"}
+
+
+@dataclass
+class Plugin:
+    """An instantiated plugin: its type and every parameter, resolved, defaults filled in."""
+
+    category: str
+    type: str
+    params: dict[str, Any]
+    id: str | None = None
+    loc: Loc | None = None
+    children: list[Plugin] = field(default_factory=list)  # nested BSDFs / integrators
+
+    def __getitem__(self, name: str) -> Any:
+        return self.params[name]
+
+
+@dataclass
+class Sensor(Plugin):
+    """A camera, with its film (and the film's ``rfilter`` child) and sampler."""
+
+    film: Plugin | None = None
+    sampler: Plugin | None = None
+
+
+@dataclass
+class Shape(Plugin):
+    """A shape with its world-space triangle mesh, its BSDF and its area emitter if any."""
+
+    mesh: Mesh | None = None
+    bsdf: Plugin | None = None
+    emitter: Plugin | None = None
+
+
+@dataclass
+class SceneDescription:
+    """Everything a scene file describes, ready for the renderer."""
+
+    path: Path
+    integrator: Plugin
+    sensors: list[Sensor]
+    shapes: list[Shape]
+    emitters: list[Plugin]          # area emitters (also on their shape) and the others
+    ids: dict[str, Plugin]
+    params: dict[str, str]          # the $parameters after <default> and -D
+
+    @property
+    def sensor(self) -> Sensor:
+        return self.sensors[0]
+
+
+def load_scene_description(path: str | Path, **defaults: Any) -> SceneDescription:
+    """Load a Mitsuba 3 scene; ``defaults`` override ``<default>`` values (``-D name=value``)."""
+    tree = read_scene(path, {k: str(v) for k, v in defaults.items()})
+    if tree.unused_defines:
+        warnings.warn(f"{tree.path}: parameters never used by the scene: "
+                      f"{', '.join(tree.unused_defines)}", stacklevel=2)
+    return _Builder(tree).build()
+
+
+class _Builder:
+    def __init__(self, tree: SceneTree) -> None:
+        self.tree = tree
+        # keyed by id(); the node is kept so that a freed temporary's id is never reused
+        self.done: dict[int, tuple[ObjectNode, Plugin]] = {}
+        self.ids: dict[str, Plugin] = {}
+
+    # -- the scene ---------------------------------------------------------------------
+    def build(self) -> SceneDescription:
+        root = self.tree.root
+        integrators, sensors, shapes, emitters = [], [], [], []
+        for ch in root.children:
+            cat = ch.node.category
+            if cat not in SCENE_CHILDREN:
+                where = "<film>" if cat == "rfilter" else "<sensor>"
+                raise scene_error(f"<{cat}> cannot appear directly inside <scene>; nest it "
+                                  f"inside {where}", ch.loc)
+            obj = self.instantiate(ch.node)
+            if cat == "integrator":
+                integrators.append(obj)
+            elif cat == "sensor":
+                sensors.append(obj)
+            elif cat == "shape":
+                shapes.append(obj)
+                if obj.emitter is not None:
+                    emitters.append(obj.emitter)
+            elif cat == "emitter":
+                if obj.type == "area":
+                    raise scene_error("an 'area' emitter must be nested inside a <shape>",
+                                      ch.loc)
+                emitters.append(obj)
+        if len(integrators) > 1:
+            raise scene_error("the scene declares more than one <integrator>",
+                              integrators[1].loc)
+        integrator = integrators[0] if integrators else self.default("integrator", "path")
+        if not sensors:
+            sensors.append(self.default_sensor(shapes))
+        return SceneDescription(self.tree.path, integrator, sensors, shapes, emitters,
+                                self.ids, dict(self.tree.params))
+
+    def default(self, category: str, ptype: str, **params: Any) -> Plugin:
+        node = ObjectNode(category, ptype, None, Loc(str(self.tree.path), 0, 0),
+                          self.tree.path.parent)
+        for k, v in params.items():
+            node.props[k] = Prop(_prop_kind(v), v, node.loc)
+        return self.instantiate(node)
+
+    def default_sensor(self, shapes: list[Shape]) -> Sensor:
+        # Mitsuba frames the scene's bounding box with a 45 degree camera.
+        if shapes:
+            pts = np.vstack([s.mesh.vertices for s in shapes]).astype(np.float64)
+            lo, hi = pts.min(axis=0), pts.max(axis=0)
+        else:
+            lo, hi = np.zeros(3), np.zeros(3)
+        center, ext = (lo + hi) / 2, hi - lo
+        dist = max(float(ext.max()), 1e-3) / (2 * math.tan(math.radians(22.5)))
+        m = xf.translate([center[0], center[1], lo[2] - dist])
+        return self.default("sensor", "perspective", fov=45.0, to_world=m,
+                            far_clip=float(ext.max()) * 5 + dist, near_clip=dist / 100,
+                            focus_distance=dist + float(ext[2]) / 2)
+
+    # -- one object --------------------------------------------------------------------
+    def instantiate(self, node: ObjectNode) -> Plugin:
+        key = id(node)
+        if key in self.done:
+            return self.done[key][1]
+        spec = spec_for(node.category, node.type)
+        if spec is None:
+            raise scene_error(f"unknown {node.category} plugin '{node.type}'; accepted: "
+                              f"{', '.join(plugin_types(node.category))}", node.loc)
+        params, objects = self.collect(node, spec)
+        cls = {"shape": Shape, "sensor": Sensor}.get(node.category, Plugin)
+        obj = cls(node.category, node.type, params, node.id, node.loc)
+        for cat, items in objects.items():
+            lo, hi = spec.children[cat]
+            if not lo <= len(items) <= hi:
+                want = str(lo) if lo == hi else f"{lo} to {hi}"
+                raise scene_error(f"{self.what(node)} takes {want} nested <{cat}>, got "
+                                  f"{len(items)}", items[-1][1].loc if items else node.loc)
+        getattr(self, f"finish_{node.category}")(obj, node, objects)
+        self.done[key] = (node, obj)
+        if node.id is not None:
+            self.ids[node.id] = obj
+        return obj
+
+    @staticmethod
+    def what(node: ObjectNode) -> str:
+        return f"{node.category} '{node.type}'"
+
+    def collect(self, node: ObjectNode, spec: PluginSpec
+                ) -> tuple[dict[str, Any], dict[str, list[tuple[Plugin, Child]]]]:
+        accepted = ", ".join(spec.params) or "no parameters"
+        params: dict[str, Any] = {}
+        objects: dict[str, list[tuple[Plugin, Child]]] = {c: [] for c in spec.children}
+        for name, prop in node.props.items():
+            if name not in spec.params:
+                raise scene_error(f"unknown parameter '{name}' of {self.what(node)}; "
+                                  f"accepted: {accepted}", prop.loc)
+            params[name] = self.convert(node, name, spec.params[name], prop.kind, prop.value,
+                                        prop.loc)
+        for ch in node.children:
+            cat = ch.node.category
+            if cat == "texture":
+                if ch.name is None:
+                    raise scene_error(f"a <texture> nested in {self.what(node)} needs a "
+                                      "name=\"...\" attribute naming the parameter it sets "
+                                      f"(accepted: {accepted})", ch.loc)
+                if ch.name not in spec.params:
+                    raise scene_error(f"unknown parameter '{ch.name}' of {self.what(node)}; "
+                                      f"accepted: {accepted}", ch.loc)
+                params[ch.name] = self.convert(node, ch.name, spec.params[ch.name], "texture",
+                                               ch.node, ch.loc)
+                continue
+            if cat not in spec.children:
+                acc = ", ".join(f"<{c}>" for c in spec.children) or "no nested objects"
+                extra = f" (a <ref> to '{ch.node.id}')" if ch.is_ref else ""
+                raise scene_error(f"{self.what(node)} does not accept a nested <{cat}>{extra}; "
+                                  f"it accepts {acc}", ch.loc)
+            objects[cat].append((self.instantiate(ch.node), ch))
+        for name, p in spec.params.items():
+            if name in params:
+                continue
+            if p.default is REQUIRED:
+                raise scene_error(f"{self.what(node)} is missing the required parameter "
+                                  f"'{name}' ({_KIND_NAMES[p.kind]})", node.loc)
+            if p.default is not None:
+                params[name] = self.convert(node, name, p, _prop_kind(p.default), p.default,
+                                            node.loc)
+            else:
+                params[name] = None
+        return params, objects
+
+    def convert(self, node: ObjectNode, name: str, p: Param, kind: str, value: Any,
+                loc: Loc) -> Any:
+        if kind not in KIND_ACCEPTS[p.kind]:
+            got = f"<{kind}>" if kind != "texture" else "a <texture>"
+            if kind == "texture" and not isinstance(value, ObjectNode):
+                got = "a texture"
+            raise scene_error(f"parameter '{name}' of {self.what(node)} expects "
+                              f"{_KIND_NAMES[p.kind]}, got {got}", loc)
+        if kind == "texture":
+            return self.instantiate(value)
+        if p.kind == "float":
+            return float(value)
+        if p.kind in ("color", "ftex"):
+            if kind in ("float", "integer"):
+                return Color.gray(value) if p.kind == "color" else float(value)
+            if node.category != "emitter" and value.wavelengths is not None:
+                # a reflectance spectrum is clamped to [0, 1] (Mitsuba's bounded conversion)
+                return Color(tuple(min(c, 1.0) for c in value.rgb), value.wavelengths,
+                             value.values)
+            return value
+        if p.kind == "ior":
+            ior = lookup_ior(value, loc) if kind == "string" else float(value)
+            if ior < 0:
+                raise scene_error(f"'{name}' must be a positive index of refraction", loc)
+            return ior
+        if p.kind in ("point", "vector"):
+            return np.asarray(value, dtype=np.float64)
+        if p.kind == "string" and p.choices and value not in p.choices:
+            raise scene_error(f"parameter '{name}' of {self.what(node)} is '{value}'; "
+                              f"accepted: {', '.join(p.choices)}", loc)
+        return value
+
+    def file(self, node: ObjectNode, name: str, what: str) -> Path:
+        loc = node.props[name].loc if name in node.props else node.loc
+        return self.tree.resolve_file(_param_str(node, name), node.base_dir,
+                                      f"{self.what(node)}: {what}", loc)
+
+    # -- per-category checks and derived values ----------------------------------------
+    def finish_shape(self, obj: Shape, node: ObjectNode, objects: dict) -> None:
+        p = obj.params
+        m = p["to_world"] if p["to_world"] is not None else xf.identity()
+        if abs(np.linalg.det(m[:3, :3])) < 1e-30:
+            raise scene_error(f"{self.what(node)}: 'to_world' is singular", _loc(node,
+                                                                                  "to_world"))
+        if obj.type == "sphere":
+            if p["radius"] <= 0:
+                raise scene_error("sphere: 'radius' must be positive", _loc(node, "radius"))
+            center = p["center"] if p["center"] is not None else np.zeros(3)
+            p["center"] = center
+            m = m @ xf.translate(center) @ xf.scale(p["radius"])
+            mesh = meshes.sphere()
+        elif obj.type in ("rectangle", "cube", "disk"):
+            mesh = getattr(meshes, obj.type)()
+        else:
+            path = self.file(node, "filename", "mesh")
+            try:
+                if obj.type == "obj":
+                    mesh = meshes.load_obj(path, p["flip_tex_coords"])
+                elif obj.type == "ply":
+                    mesh = meshes.load_ply(path, p["flip_tex_coords"])
+                else:
+                    mesh = meshes.load_serialized(path, p["shape_index"])
+            except MeshError as e:
+                raise scene_error(f"{self.what(node)}: cannot load mesh file '{p['filename']}':"
+                                  f" {e}", _loc(node, "filename")) from None
+            except OSError as e:
+                raise scene_error(f"{self.what(node)}: cannot read mesh file "
+                                  f"'{p['filename']}': {e.strerror}",
+                                  _loc(node, "filename")) from None
+            p["filename"] = str(path)
+        face_normals = bool(p.get("face_normals") or mesh.face_normals)
+        p["to_world"] = m
+        obj.mesh = meshes.to_world(mesh, m, p["flip_normals"], face_normals)
+        bsdfs, ems = objects["bsdf"], objects["emitter"]
+        obj.bsdf = bsdfs[0][0] if bsdfs else self.default("bsdf", "diffuse")
+        if ems:
+            em, ch = ems[0]
+            if em.type != "area":
+                raise scene_error(f"only an 'area' emitter can be attached to a shape, not "
+                                  f"'{em.type}'", ch.loc)
+            obj.emitter = em
+
+    def finish_bsdf(self, obj: Plugin, node: ObjectNode, objects: dict) -> None:
+        p = obj.params
+        obj.children = [b for b, _ in objects.get("bsdf", [])]
+        if "material" in p:
+            given = [k for k in ("eta", "k") if p[k] is not None]
+            if given and "material" in node.props:
+                raise scene_error(f"{self.what(node)}: give either 'material' or 'eta'/'k', "
+                                  "not both", _loc(node, "material"))
+            if given:
+                p["eta"] = p["eta"] if p["eta"] is not None else Color.gray(0.0)
+                p["k"] = p["k"] if p["k"] is not None else Color.gray(1.0)
+            else:
+                p["eta"], p["k"] = conductor_ior(p["material"], _loc(node, "material"))
+        if "alpha_u" in p:
+            has_u, has_v = p["alpha_u"] is not None, p["alpha_v"] is not None
+            if has_u != has_v:
+                raise scene_error(f"{self.what(node)}: give both 'alpha_u' and 'alpha_v'",
+                                  _loc(node, "alpha_u" if has_u else "alpha_v"))
+            if has_u and "alpha" in node.props:
+                raise scene_error(f"{self.what(node)}: give either 'alpha' or "
+                                  "'alpha_u'/'alpha_v', not both", _loc(node, "alpha"))
+            if not has_u:
+                p["alpha_u"] = p["alpha_v"] = p["alpha"]
+        if "int_ior" in p:
+            p["eta"] = p["int_ior"] / p["ext_ior"] if p["ext_ior"] > 0 else 0.0
+
+    def finish_texture(self, obj: Plugin, node: ObjectNode, objects: dict) -> None:
+        p = obj.params
+        if p.get("to_uv") is None:
+            p["to_uv"] = xf.identity()
+        if obj.type == "bitmap":
+            path = self.file(node, "filename", "texture")
+            if path.suffix.lower() not in BITMAP_FORMATS:
+                raise scene_error(f"bitmap: image format '{path.suffix}' of '{p['filename']}' "
+                                  f"is not supported; accepted: {', '.join(BITMAP_FORMATS)}",
+                                  _loc(node, "filename"))
+            p["filename"] = str(path)
+
+    def finish_emitter(self, obj: Plugin, node: ObjectNode, objects: dict) -> None:
+        p = obj.params
+        if "to_world" in p and p["to_world"] is None:
+            p["to_world"] = xf.identity()
+        if obj.type == "point" and p["position"] is not None:
+            if "to_world" in node.props:
+                raise scene_error("point emitter: give either 'position' or 'to_world'",
+                                  _loc(node, "position"))
+            p["to_world"] = xf.translate(p["position"])
+        if obj.type == "point":
+            p["position"] = p["to_world"][:3, 3].copy()
+        if obj.type == "spot" and p["beam_width"] is None:
+            p["beam_width"] = p["cutoff_angle"] * 0.75
+        if obj.type == "directional":
+            if p["direction"] is not None:
+                if "to_world" in node.props:
+                    raise scene_error("directional emitter: give either 'direction' or "
+                                      "'to_world'", _loc(node, "direction"))
+                d = p["direction"]
+                if not np.any(d):
+                    raise scene_error("directional emitter: 'direction' is zero",
+                                      _loc(node, "direction"))
+                p["to_world"] = xf.look_at([0, 0, 0], d)
+            p["direction"] = p["to_world"][:3, 2] / np.linalg.norm(p["to_world"][:3, 2])
+        if obj.type == "envmap":
+            path = self.file(node, "filename", "environment map")
+            if path.suffix.lower() not in BITMAP_FORMATS:
+                raise scene_error(f"envmap: image format '{path.suffix}' is not supported; "
+                                  f"accepted: {', '.join(BITMAP_FORMATS)}", _loc(node, "filename"))
+            p["filename"] = str(path)
+
+    def finish_integrator(self, obj: Plugin, node: ObjectNode, objects: dict) -> None:
+        p = obj.params
+        obj.children = [i for i, _ in objects.get("integrator", [])]
+        if obj.type == "path":
+            if p["max_depth"] < -1:
+                raise scene_error("path: 'max_depth' must be -1 (infinite) or >= 0",
+                                  _loc(node, "max_depth"))
+            if p["rr_depth"] <= 0:
+                raise scene_error("path: 'rr_depth' must be > 0", _loc(node, "rr_depth"))
+        elif obj.type == "direct":
+            ss = p["shading_samples"]
+            for k in ("emitter_samples", "bsdf_samples"):
+                if p[k] is None:
+                    p[k] = ss if ss is not None else 1
+                if p[k] < 0:
+                    raise scene_error(f"direct: '{k}' must be >= 0", _loc(node, k))
+        elif obj.type == "aov":
+            aovs = []
+            for item in (s.strip() for s in p["aovs"].split(",")):
+                name, sep, kind = item.partition(":")
+                if not sep or not name.strip() or kind.strip() not in AOV_TYPES:
+                    raise scene_error(f"aov: bad entry '{item}' in 'aovs'; write name:type with "
+                                      f"type one of {', '.join(AOV_TYPES)}", _loc(node, "aovs"))
+                aovs.append((name.strip(), kind.strip()))
+            p["aov_list"] = aovs
+
+    def finish_sensor(self, obj: Sensor, node: ObjectNode, objects: dict) -> None:
+        p = obj.params
+        obj.film = objects["film"][0][0] if objects["film"] else self.default("film", "hdrfilm")
+        obj.sampler = (objects["sampler"][0][0] if objects["sampler"]
+                       else self.default("sampler", "independent"))
+        m = p["to_world"] if p["to_world"] is not None else xf.identity()
+        if xf.has_scale(m):
+            raise scene_error(f"{self.what(node)}: scale factors in the camera's 'to_world' are "
+                              "not allowed", _loc(node, "to_world"))
+        p["to_world"] = m
+        if p["near_clip"] <= 0:
+            raise scene_error("'near_clip' must be greater than zero", _loc(node, "near_clip"))
+        if p["near_clip"] >= p["far_clip"]:
+            raise scene_error("'near_clip' must be smaller than 'far_clip'",
+                              _loc(node, "near_clip"))
+        if p["focus_distance"] is None:
+            p["focus_distance"] = p["far_clip"]
+        aspect = obj.film["width"] / obj.film["height"]
+        p["fov_x"] = self.fov_x(node, p, aspect)
+
+    def fov_x(self, node: ObjectNode, p: dict, aspect: float) -> float:
+        """Mitsuba's ``parse_fov``: the horizontal field of view in degrees."""
+        if p["fov"] is not None and p["focal_length"] is not None:
+            raise scene_error("give either 'fov' or 'focal_length', not both", _loc(node, "fov"))
+        if p["fov"] is not None:
+            fov, axis = p["fov"], p["fov_axis"]
+            if axis == "smaller":
+                axis = "y" if aspect > 1 else "x"
+            elif axis == "larger":
+                axis = "x" if aspect > 1 else "y"
+        else:
+            f = p["focal_length"] or "50mm"
+            try:
+                value = float(f.removesuffix("mm"))
+            except ValueError:
+                raise scene_error(f"cannot parse focal_length '{f}' (write e.g. \"50mm\")",
+                                  _loc(node, "focal_length")) from None
+            fov, axis = 2 * math.degrees(math.atan(math.hypot(36, 24) / (2 * value))), "diagonal"
+        t = math.tan(math.radians(fov) / 2)
+        if axis == "x":
+            out = fov
+        elif axis == "y":
+            out = 2 * math.degrees(math.atan(t * aspect))
+        else:
+            out = 2 * math.degrees(math.atan(t / math.sqrt(1 + 1 / (aspect * aspect))))
+        if not 0 < out < 180:
+            raise scene_error(f"the horizontal field of view ({out:g} degrees) must be in "
+                              "(0, 180)", _loc(node, "fov"))
+        return out
+
+    def finish_film(self, obj: Plugin, node: ObjectNode, objects: dict) -> None:
+        p = obj.params
+        obj.children = []
+        p["rfilter"] = (objects["rfilter"][0][0] if objects["rfilter"]
+                        else self.default("rfilter", "gaussian"))
+        for k in ("width", "height"):
+            if p[k] <= 0:
+                raise scene_error(f"hdrfilm: '{k}' must be positive", _loc(node, k))
+        p["crop_width"] = p["width"] if p["crop_width"] is None else p["crop_width"]
+        p["crop_height"] = p["height"] if p["crop_height"] is None else p["crop_height"]
+        for axis, size in (("x", "width"), ("y", "height")):
+            off, crop = p[f"crop_offset_{axis}"], p[f"crop_{size}"]
+            if off < 0 or crop <= 0 or off + crop > p[size]:
+                raise scene_error(f"hdrfilm: invalid crop window: crop_offset_{axis}={off} and "
+                                  f"crop_{size}={crop} do not fit in {size}={p[size]}",
+                                  _loc(node, f"crop_{size}" if f"crop_{size}" in node.props
+                                       else f"crop_offset_{axis}"))
+
+    def finish_rfilter(self, obj: Plugin, node: ObjectNode, objects: dict) -> None:
+        for k, v in obj.params.items():
+            if v <= 0:
+                raise scene_error(f"rfilter '{obj.type}': '{k}' must be positive", _loc(node, k))
+
+    def finish_sampler(self, obj: Plugin, node: ObjectNode, objects: dict) -> None:
+        if obj.params["sample_count"] <= 0:
+            raise scene_error("sampler: 'sample_count' must be positive",
+                              _loc(node, "sample_count"))
+
+
+def _param_str(node: ObjectNode, name: str) -> str:
+    """A string parameter as the scene wrote it (the caller checked it is present)."""
+    return str(node.props[name].value)
+
+
+def _loc(node: ObjectNode, name: str) -> Loc:
+    """The line of parameter ``name`` if the scene gave it, else the object's line."""
+    if name in node.props:
+        return node.props[name].loc
+    for ch in node.children:
+        if ch.name == name:
+            return ch.loc
+    return node.loc
+
+
+def _prop_kind(v: Any) -> str:
+    if isinstance(v, bool):
+        return "boolean"
+    if isinstance(v, int):
+        return "integer"
+    if isinstance(v, float):
+        return "float"
+    if isinstance(v, str):
+        return "string"
+    if isinstance(v, np.ndarray):
+        return "transform" if v.shape == (4, 4) else "point"
+    if isinstance(v, Color):
+        return "rgb"
+    raise TypeError(type(v))

@@ -1,0 +1,189 @@
+"""The plugins rdsl loads, their parameters, the kinds those take and Mitsuba 3's defaults.
+
+A parameter's ``kind`` says which XML values it accepts:
+
+============  ===================================================================
+``float``     ``<float>`` (an ``<integer>`` is promoted, as in Mitsuba)
+``integer``   ``<integer>``
+``boolean``   ``<boolean>``
+``string``    ``<string>``
+``point``     ``<point>`` or ``<vector>``
+``vector``    ``<vector>`` or ``<point>``
+``transform`` ``<transform>``
+``color``     ``<float>``, ``<rgb>``, ``<spectrum>`` or a ``<texture>`` (nested or ``<ref>``)
+``ftex``      ``<float>`` or a ``<texture>`` (a scalar texture, e.g. roughness)
+``ior``       ``<float>`` or ``<string>`` naming a dielectric (``"bk7"``, ``"water"``)
+============  ===================================================================
+
+``REQUIRED`` marks a parameter without a default; ``None`` one that is optional and whose
+absence the loader resolves (e.g. ``crop_width`` defaults to ``width``).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+REQUIRED: Any = object()
+
+KIND_ACCEPTS: dict[str, tuple[str, ...]] = {
+    "float": ("float", "integer"),
+    "integer": ("integer",),
+    "boolean": ("boolean",),
+    "string": ("string",),
+    "point": ("point", "vector"),
+    "vector": ("vector", "point"),
+    "transform": ("transform",),
+    "color": ("float", "integer", "rgb", "spectrum", "texture"),
+    "ftex": ("float", "integer", "texture"),
+    "ior": ("float", "integer", "string"),
+}
+
+
+@dataclass(frozen=True)
+class Param:
+    """One accepted parameter: its kind, Mitsuba's default, and allowed values for strings."""
+
+    kind: str
+    default: Any = None
+    choices: tuple[str, ...] | None = None
+
+
+@dataclass(frozen=True)
+class PluginSpec:
+    """An accepted plugin: its parameters and which nested objects it takes (min, max)."""
+
+    category: str
+    type: str
+    params: dict[str, Param]
+    children: dict[str, tuple[int, int]] = field(default_factory=dict)
+
+
+def P(kind: str, default: Any = None, choices: tuple[str, ...] | None = None) -> Param:
+    return Param(kind, default, choices)
+
+
+_DIST = P("string", "beckmann", ("beckmann", "ggx"))
+_SHAPE = {"to_world": P("transform"), "flip_normals": P("boolean", False)}
+_MESH = {**_SHAPE, "face_normals": P("boolean", False)}
+_SHAPE_CHILDREN = {"bsdf": (0, 1), "emitter": (0, 1)}
+_ROUGH = {"distribution": _DIST, "alpha": P("ftex", 0.1), "alpha_u": P("ftex"),
+          "alpha_v": P("ftex"), "sample_visible": P("boolean", True)}
+_CONDUCTOR = {"material": P("string", "none"), "eta": P("color"), "k": P("color"),
+              "specular_reflectance": P("color", 1.0)}
+_DIELECTRIC = {"int_ior": P("ior", "bk7"), "ext_ior": P("ior", "air"),
+               "specular_reflectance": P("color", 1.0),
+               "specular_transmittance": P("color", 1.0)}
+_PLASTIC = {"diffuse_reflectance": P("color", 0.5), "specular_reflectance": P("color", 1.0),
+            "int_ior": P("ior", "polypropylene"), "ext_ior": P("ior", "air"),
+            "nonlinear": P("boolean", False)}
+_TEX = {"to_uv": P("transform")}
+_CAMERA = {
+    "to_world": P("transform"), "fov": P("float"),
+    "fov_axis": P("string", "x", ("x", "y", "diagonal", "smaller", "larger")),
+    "focal_length": P("string"), "near_clip": P("float", 1e-2), "far_clip": P("float", 1e4),
+    "focus_distance": P("float"), "shutter_open": P("float", 0.0),
+    "shutter_close": P("float", 0.0),
+}
+_SENSOR_CHILDREN = {"film": (0, 1), "sampler": (0, 1)}
+
+_SPECS = [
+    # shapes
+    PluginSpec("shape", "rectangle", dict(_SHAPE), _SHAPE_CHILDREN),
+    PluginSpec("shape", "cube", dict(_MESH), _SHAPE_CHILDREN),
+    PluginSpec("shape", "disk", dict(_SHAPE), _SHAPE_CHILDREN),
+    PluginSpec("shape", "sphere", {**_SHAPE, "center": P("point"), "radius": P("float", 1.0)},
+               _SHAPE_CHILDREN),
+    PluginSpec("shape", "obj", {**_MESH, "filename": P("string", REQUIRED),
+                                "flip_tex_coords": P("boolean", True)}, _SHAPE_CHILDREN),
+    PluginSpec("shape", "ply", {**_MESH, "filename": P("string", REQUIRED),
+                                "flip_tex_coords": P("boolean", False)}, _SHAPE_CHILDREN),
+    PluginSpec("shape", "serialized", {**_MESH, "filename": P("string", REQUIRED),
+                                       "shape_index": P("integer", 0)}, _SHAPE_CHILDREN),
+    # BSDFs
+    PluginSpec("bsdf", "diffuse", {"reflectance": P("color", 0.5)}),
+    PluginSpec("bsdf", "conductor", dict(_CONDUCTOR)),
+    PluginSpec("bsdf", "roughconductor", {**_CONDUCTOR, **_ROUGH}),
+    PluginSpec("bsdf", "dielectric", dict(_DIELECTRIC)),
+    PluginSpec("bsdf", "thindielectric", dict(_DIELECTRIC)),
+    PluginSpec("bsdf", "roughdielectric", {**_DIELECTRIC, **_ROUGH}),
+    PluginSpec("bsdf", "plastic", dict(_PLASTIC)),
+    PluginSpec("bsdf", "roughplastic", {**_PLASTIC, "distribution": _DIST,
+                                        "alpha": P("float", 0.1),
+                                        "sample_visible": P("boolean", True)}),
+    PluginSpec("bsdf", "twosided", {}, {"bsdf": (1, 2)}),
+    PluginSpec("bsdf", "mask", {"opacity": P("ftex", 0.5)}, {"bsdf": (1, 1)}),
+    PluginSpec("bsdf", "blendbsdf", {"weight": P("ftex", REQUIRED)}, {"bsdf": (2, 2)}),
+    # textures
+    PluginSpec("texture", "bitmap", {
+        **_TEX, "filename": P("string", REQUIRED),
+        "filter_type": P("string", "bilinear", ("bilinear", "nearest")),
+        "wrap_mode": P("string", "repeat", ("repeat", "mirror", "clamp")),
+        "raw": P("boolean", False)}),
+    PluginSpec("texture", "checkerboard", {**_TEX, "color0": P("color", 0.4),
+                                           "color1": P("color", 0.2)}),
+    # emitters
+    PluginSpec("emitter", "area", {"radiance": P("color", 1.0)}),
+    PluginSpec("emitter", "point", {"intensity": P("color", 1.0), "position": P("point"),
+                                    "to_world": P("transform")}),
+    PluginSpec("emitter", "spot", {"intensity": P("color", 1.0),
+                                   "cutoff_angle": P("float", 20.0), "beam_width": P("float"),
+                                   "texture": P("color"), "to_world": P("transform")}),
+    PluginSpec("emitter", "directional", {"irradiance": P("color", 1.0),
+                                          "direction": P("vector"),
+                                          "to_world": P("transform")}),
+    PluginSpec("emitter", "constant", {"radiance": P("color", 1.0)}),
+    PluginSpec("emitter", "envmap", {"filename": P("string", REQUIRED), "scale": P("float", 1.0),
+                                     "to_world": P("transform"),
+                                     "filter_type": P("string", "bilinear",
+                                                      ("bilinear", "nearest"))}),
+    # integrators
+    PluginSpec("integrator", "path", {"max_depth": P("integer", -1),
+                                      "rr_depth": P("integer", 5),
+                                      "hide_emitters": P("boolean", False)}),
+    PluginSpec("integrator", "direct", {"emitter_samples": P("integer"),
+                                        "bsdf_samples": P("integer"),
+                                        "shading_samples": P("integer"),
+                                        "hide_emitters": P("boolean", False)}),
+    PluginSpec("integrator", "aov", {"aovs": P("string", REQUIRED)}, {"integrator": (0, 8)}),
+    # sensors, film, filters, samplers
+    PluginSpec("sensor", "perspective", {**_CAMERA,
+                                         "principal_point_offset_x": P("float", 0.0),
+                                         "principal_point_offset_y": P("float", 0.0)},
+               _SENSOR_CHILDREN),
+    PluginSpec("sensor", "thinlens", {**_CAMERA, "aperture_radius": P("float", REQUIRED)},
+               _SENSOR_CHILDREN),
+    PluginSpec("film", "hdrfilm", {
+        "width": P("integer", 768), "height": P("integer", 576),
+        "crop_offset_x": P("integer", 0), "crop_offset_y": P("integer", 0),
+        "crop_width": P("integer"), "crop_height": P("integer"),
+        "file_format": P("string", "openexr", ("openexr", "exr", "rgbe", "pfm")),
+        "pixel_format": P("string", "rgb", ("luminance", "luminance_alpha", "rgb", "rgba",
+                                            "xyz", "xyza")),
+        "component_format": P("string", "float16", ("float16", "float32", "uint32")),
+        "sample_border": P("boolean", False)}, {"rfilter": (0, 1)}),
+    PluginSpec("rfilter", "box", {"radius": P("float", 0.5)}),
+    PluginSpec("rfilter", "tent", {"radius": P("float", 1.0)}),
+    PluginSpec("rfilter", "gaussian", {"stddev": P("float", 0.5)}),
+    PluginSpec("sampler", "independent", {"sample_count": P("integer", 4),
+                                          "seed": P("integer", 0)}),
+]
+
+SCHEMA: dict[tuple[str, str], PluginSpec] = {(s.category, s.type): s for s in _SPECS}
+
+# What the <scene> itself accepts as direct children.
+SCENE_CHILDREN = ("shape", "bsdf", "texture", "emitter", "integrator", "sensor")
+
+AOV_TYPES = ("albedo", "depth", "position", "uv", "geo_normal", "sh_normal", "dp_du", "dp_dv",
+             "duv_dx", "duv_dy", "prim_index", "shape_index")
+
+BITMAP_FORMATS = (".png", ".jpg", ".jpeg", ".exr")
+
+
+def plugin_types(category: str) -> list[str]:
+    """The accepted ``type=`` values of one category, for error messages."""
+    return [s.type for s in _SPECS if s.category == category]
+
+
+def spec_for(category: str, ptype: str) -> PluginSpec | None:
+    return SCHEMA.get((category, ptype))
