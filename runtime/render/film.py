@@ -1,0 +1,72 @@
+"""Per-scene setup of the `Film` struct of ``stdlib/render/film.rdsl``, and ``develop``.
+
+The per-sample work (filter weights, the gather) is in the stdlib; this module only turns the
+loader's ``hdrfilm``/``rfilter`` into uniforms, sizes the buffers and divides at the end.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+
+__all__ = ["FILTERS", "border_size", "develop", "film_uniforms", "filter_radius",
+           "new_accumulator"]
+
+# rfilter type -> the kind id of film.rdsl (filter_box / filter_tent / filter_gaussian)
+FILTERS = {"box": 0, "tent": 1, "gaussian": 2}
+
+
+def _filter_param(rfilter: Any) -> float:
+    if rfilter.type == "gaussian":
+        return float(rfilter.params.get("stddev", 0.5))
+    if rfilter.type == "tent":
+        return float(rfilter.params.get("radius", 1.0))
+    return 0.5
+
+
+def filter_radius(rfilter: Any) -> float:
+    """The filter's support radius in pixels (Mitsuba's ``ReconstructionFilter::radius``)."""
+    if rfilter.type == "gaussian":
+        return 4.0 * _filter_param(rfilter)
+    return _filter_param(rfilter)
+
+
+def border_size(rfilter: Any) -> int:
+    """Mitsuba's ``border_size``: ceil(radius - 1/2), the margin `sample_border` renders."""
+    return 0 if rfilter.type == "box" else math.ceil(filter_radius(rfilter) - 0.5)
+
+
+def film_uniforms(film: Any, spp: int, channels: int = 3) -> dict[str, Any]:
+    """The `Film` field values for a loaded ``hdrfilm`` and ``spp`` samples per grid pixel.
+
+    The sample grid is the crop window, grown by ``border_size`` on each side when the film
+    has ``sample_border`` (as Mitsuba renders it); the renderer must lay its samples out on
+    that grid: see the buffer layouts in ``film.rdsl``."""
+    p = film.params
+    rf = p["rfilter"]
+    if rf.type not in FILTERS:
+        raise ValueError(f"unsupported reconstruction filter `{rf.type}`")
+    cx, cy, cw, ch = (int(p[k]) for k in ("crop_offset_x", "crop_offset_y",
+                                          "crop_width", "crop_height"))
+    b = border_size(rf) if p.get("sample_border") else 0
+    return {"crop_x": cx, "crop_y": cy, "crop_w": cw, "crop_h": ch,
+            "grid_x": cx - b, "grid_y": cy - b, "grid_w": cw + 2 * b, "grid_h": ch + 2 * b,
+            "spp": int(spp), "channels": int(channels),
+            "filter": FILTERS[rf.type], "filter_param": _filter_param(rf)}
+
+
+def new_accumulator(film: dict[str, Any]) -> np.ndarray:
+    """A zeroed accumulator for ``film_uniforms``' film: (crop_w * crop_h * (C + 1),) float32."""
+    return np.zeros(film["crop_w"] * film["crop_h"] * (film["channels"] + 1), np.float32)
+
+
+def develop(acc: np.ndarray, film: dict[str, Any]) -> np.ndarray:
+    """Divide the weighted sums by the weights: a (crop_h, crop_w, C) float32 image.
+
+    Pixels with zero weight stay 0 (Mitsuba divides by 1 there)."""
+    c = film["channels"]
+    a = np.asarray(acc, np.float32).reshape(film["crop_h"], film["crop_w"], c + 1)
+    w = a[..., c:]
+    return (a[..., :c] / np.where(w == 0, np.float32(1), w)).astype(np.float32)
