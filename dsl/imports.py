@@ -1,0 +1,90 @@
+"""Module loading: the implicit prelude, the main file and, depth first, its imports.
+
+An ``import a.b;`` is looked up as ``a/b.rdsl`` next to the importing file, then in the
+search paths, then in the stdlib.  Each file is parsed once; a cycle is an error.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from . import ast as A
+from .parser import parse
+from .program import ModuleInfo
+from .types import err
+
+STDLIB = Path(__file__).resolve().parent.parent / "stdlib"
+
+
+class Loader:
+    """Parses the main file and, depth first, everything it imports."""
+
+    def __init__(self, search_paths: list[Path]) -> None:
+        self.search_paths = search_paths
+        self.modules: dict[str, ModuleInfo] = {}
+        self.order: list[ModuleInfo] = []
+        self.stack: list[str] = []
+
+    def load_path(self, path: Path, is_main: bool = False) -> ModuleInfo:
+        key = str(path.resolve())
+        try:
+            text = path.read_text()
+        except (OSError, UnicodeDecodeError) as e:
+            raise err(f"cannot read `{path}`: {e}", None) from None
+        return self.load_text(text, str(path), key, is_main)
+
+    def load_text(self, text: str, filename: str, key: str, is_main: bool) -> ModuleInfo:
+        if key in self.modules:
+            mod = self.modules[key]
+            mod.is_main = mod.is_main or is_main
+            return mod
+        prog = parse(text, filename)
+        mod = ModuleInfo(key, prog, is_main)
+        self.stack.append(key)
+        for imp in prog.imports:
+            self._import(imp, filename)
+        self.stack.pop()
+        self.modules[key] = mod
+        self.order.append(mod)
+        return mod
+
+    def _import(self, imp: A.Import, importer: str) -> None:
+        rel = Path(*imp.path).with_suffix(".rdsl")
+        dirs: list[Path] = []
+        if not importer.startswith("<"):
+            dirs.append(Path(importer).parent)
+        dirs += self.search_paths + [STDLIB]
+        for d in dirs:
+            cand = d / rel
+            if cand.is_file():
+                key = str(cand.resolve())
+                if key in self.stack:
+                    cycle = self.stack[self.stack.index(key):] + [key]
+                    names = " -> ".join(Path(k).name for k in cycle)
+                    raise err(f"import cycle: {names}", imp.loc)
+                if key not in self.modules:
+                    self.load_path(cand)
+                return
+        name = ".".join(imp.path)
+        raise err(f"cannot find module `{name}` (looked for `{rel.as_posix()}` next to "
+                  f"the importing file and in the stdlib)", imp.loc)
+
+
+def prelude() -> list[Path]:
+    """The implicitly imported stdlib files."""
+    types = STDLIB / "types.rdsl"
+    math = STDLIB / "math.rdsl"
+    # Both are part of the package; a broken prelude is an rdsl bug, and it is reported as
+    # a diagnostic in the prelude file rather than skipped, so nothing half-works silently.
+    return [p for p in (types, math) if p.is_file()]
+
+
+def load_program(source: str, filename: str, search_paths: list[Path] | None = None,
+                 path: Path | None = None) -> list[ModuleInfo]:
+    """The prelude, the main file (text ``source``) and its imports, dependencies first."""
+    loader = Loader([Path(p) for p in (search_paths or [])])
+    for p in prelude():
+        loader.load_path(p).prelude = True
+    key = str(path.resolve()) if path is not None else f"<main>{filename}"
+    loader.load_text(source, filename, key, is_main=True)
+    return loader.order

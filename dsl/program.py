@@ -1,0 +1,79 @@
+"""The entities the checker resolves: symbols, modules, functions, plugins, the program."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+from ..compiler.ir import Loc, StructType, Type
+from . import ast as A
+from .types import type_name
+
+
+@dataclass(eq=False)
+class Symbol:
+    """A local name: ``let``/``var`` binding, parameter, plugin param or loop variable."""
+
+    name: str
+    type: Type
+    kind: str  # "let" | "var" | "param" | "plugin_param" | "loop"
+    loc: Loc
+
+    def __repr__(self) -> str:
+        return f"<{self.kind} {self.name}: {type_name(self.type)}>"
+
+
+@dataclass(eq=False)
+class ModuleInfo:
+    """One loaded source file."""
+
+    key: str
+    program: A.Program
+    is_main: bool = False
+    prelude: bool = False
+
+
+@dataclass(eq=False)
+class FnInfo:
+    """A checked function (top-level or plugin member)."""
+
+    name: str
+    decl: A.FnDecl
+    params: list[Symbol]
+    ret: Type | None
+    module: ModuleInfo
+    plugin: PluginInfo | None = None
+    ir_name: str = ""
+
+    @property
+    def param_types(self) -> list[Type]:
+        return [p.type for p in self.params]
+
+    def signature(self) -> str:
+        args = ", ".join(type_name(t) for t in self.param_types)
+        ret = f" -> {type_name(self.ret)}" if self.ret is not None else ""
+        return f"{self.name}({args}){ret}"
+
+
+@dataclass(eq=False)
+class PluginInfo:
+    """A checked plugin: its params (with python default values) and functions."""
+
+    kind: str
+    name: str
+    decl: A.PluginDecl
+    module: ModuleInfo
+    params: list[Symbol] = field(default_factory=list)
+    defaults: list[Any] = field(default_factory=list)
+    fns: dict[str, FnInfo] = field(default_factory=dict)
+
+
+@dataclass
+class CheckedProgram:
+    """The result of :func:`check_program`: typed AST plus resolved entities."""
+
+    main_file: str
+    modules: list[ModuleInfo]
+    structs: dict[str, StructType]
+    functions: list[FnInfo]  # top-level functions of every module
+    plugins: list[PluginInfo]
