@@ -20,6 +20,7 @@ from .passes.inline import Inline
 from .passes.lift import Lift
 from .passes.optimize import Optimize
 from .passes.scalarize import Scalarize
+from .passes.specialize import SceneSpec, Specialize
 from .passes.vectorize import Vectorize
 
 
@@ -28,9 +29,11 @@ class InternalError(Exception):
     """A bug in rdsl (not the user's fault), tagged with the pass that hit it."""
 
 
-def pipeline(variant: str, width: int) -> list[Pass]:
+def pipeline(variant: str, width: int, scene: SceneSpec | None = None,
+             report: list[str] | None = None) -> list[Pass]:
     """The passes from lowered IR to vectorized scalar IR, in order."""
     return [
+        *([Specialize(scene, report)] if scene is not None else []),  # the scene's instances
         Inline(),  # calls become bodies; recursion is a diagnostic
         Optimize(),  # fold and prune early, so later passes see less
         Lift(variant),  # Spectrum becomes mono/rgb; `if const` traits become constants
@@ -88,13 +91,16 @@ def frontend(source_or_path: str | Path, filename: str | None = None) -> Module:
 
 
 def compile_kernels(source_or_path: str | Path, target: str = "host", variant: str = "rgb",
-                    filename: str | None = None) -> tuple[Module, list[Path]]:
+                    filename: str | None = None, scene: SceneSpec | None = None,
+                    report: list[str] | None = None) -> tuple[Module, list[Path]]:
     """Compile to post-vectorize IR for ``target``.  Returns the module and the source
-    files it was built from (for cache keys)."""
+    files it was built from (for cache keys).  ``scene`` specializes the scene
+    placeholders (see :mod:`rdsl.compiler.passes.specialize`); ``report`` collects what
+    specialization did."""
     from .targets import get_target
 
     tgt = get_target(target)
     module = frontend(source_or_path, filename)
-    run_passes(module, pipeline(variant, tgt.width))
+    run_passes(module, pipeline(variant, tgt.width, scene, report))
     module.attrs["target"] = tgt.name
     return module, source_files(source_or_path)

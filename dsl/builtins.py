@@ -37,7 +37,7 @@ from .types import (
 BUILTIN_FNS = {
     "sqrt", "floor", "ceil", "abs", "min", "max", "select", "bits", "from_bits", "Float", "Int",
     "UInt", "UInt64", "Bool", "Vec2", "Vec3", "Vec4", "Mat3", "Mat4", "Spectrum", "mean",
-    "max_value", "intersect", "occluded",
+    "max_value", "trace", "occluded",
 }
 
 
@@ -143,15 +143,13 @@ def check_builtin(e: A.Call, name: str, args: list[A.Expr], types: list[Type | N
         nargs(1)
         arg(0, SPECTRUM)
         return finish(F32)
-    if name == "intersect":
+    if name == "trace":
         nargs(1)
         arg(0, structs.get("Ray") or StructType("Ray"))
-        return finish(structs.get("Surface"))
+        return finish(structs.get("Hit"))
     if name == "occluded":
-        nargs(1, 2)
+        nargs(1)
         arg(0, structs.get("Ray") or StructType("Ray"))
-        if len(args) == 2:
-            arg(1, F32)
         return finish(BOOL)
     raise err(f"unknown function `{name}`", loc)  # pragma: no cover
 

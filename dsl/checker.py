@@ -75,9 +75,9 @@ PLUGIN_INTERFACES: dict[str, list[tuple[str, list[tuple[str, str]], str]]] = {
     "bsdf": [("eval", [("si", "Surface"), ("wo", "Vec3")], "Spectrum"),
              ("pdf", [("si", "Surface"), ("wo", "Vec3")], "Float"),
              ("sample", [("si", "Surface"), ("u1", "Float"), ("u2", "Vec2")], "BsdfSample")],
-    "emitter": [("eval", [("si", "Surface")], "Spectrum"),
-                ("sample", [("p", "Vec3"), ("u", "Vec2")], "EmitterSample"),
-                ("pdf", [("p", "Vec3"), ("y", "Vec3"), ("n", "Vec3")], "Float")],
+    # area lights are sampled by the integrator over the scene's triangles, so only the
+    # emitted radiance is required of an emitter
+    "emitter": [("eval", [("si", "Surface")], "Spectrum")],
     "texture": [("eval", [("si", "Surface")], "Spectrum")],
     "integrator": [("li", [("ray", "Ray"), ("seed", "UInt")], "Spectrum")],
 }

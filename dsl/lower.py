@@ -117,7 +117,7 @@ def _assigned(stmts: list[A.Stmt], out: set[Symbol]) -> set[Symbol]:
 def _has_effects(e: Any) -> bool:
     """Whether an expression calls a function or loads memory (no speculation then)."""
     if isinstance(e, A.Call) and (isinstance(e.target, FnInfo) or e.target in (
-            ("builtin", "intersect"), ("builtin", "occluded"))):
+            ("builtin", "trace"), ("builtin", "occluded"))):
         return True
     if isinstance(e, A.Index):
         return True
@@ -531,7 +531,7 @@ class _FnLowerer:
             return self.op(loc, Op.SPEC_AVG, F32, args[0])
         if name == "max_value":
             return self.op(loc, Op.SPEC_MAX, F32, args[0])
-        if name == "intersect":
+        if name == "trace":
             return self.op(loc, Op.INTERSECT, t, *args)
         if name == "occluded":
             return self.op(loc, Op.OCCLUDED, BOOL, *args)

@@ -452,9 +452,9 @@ texture checker {
 }
 integrator depth {
     fn li(ray: Ray, seed: UInt) -> Spectrum {
-        let si = intersect(ray);
-        if !si.valid { return Spectrum(0.0); }
-        return Spectrum(si.t);
+        let h = trace(ray);
+        if !h.valid { return Spectrum(0.0); }
+        return Spectrum(h.t);
     }
 }
 """)

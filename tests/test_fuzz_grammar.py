@@ -78,7 +78,7 @@ fn early(x: Float) -> Float {
 integrator depth {
     param max_depth: Int = 4;
     fn li(ray: Ray, seed: UInt) -> Spectrum {
-        let si = intersect(ray);
+        let si = trace(ray);
         if !si.valid { return Spectrum(0.0); }
         return Spectrum(si.t + Float(hash(seed)) * 1e-9);
     }

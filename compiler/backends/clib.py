@@ -15,6 +15,7 @@ from .. import ir
 from ..diagnostics import CompileError
 from ..targets import Target, get_target
 from .base import c_args, c_name, c_prototype, kernels, result_names
+from .llvm_rays import uses_embree
 from .llvm import emit_object
 
 OUTPUT_SUFFIXES = (".so", ".h", ".json")
@@ -118,8 +119,9 @@ def _cc() -> str:
     return cc
 
 
-def link_shared(obj: bytes, so_path: Path) -> None:
-    """Link an object file into a shared library with ``cc -shared``."""
+def link_shared(obj: bytes, so_path: Path, extra: list[str] | tuple[str, ...] = ()) -> None:
+    """Link an object file into a shared library with ``cc -shared`` (``extra``: more
+    linker arguments, e.g. libembree4 for kernels that trace rays)."""
     cc = _cc()
     with tempfile.TemporaryDirectory(prefix="rdsl-link-") as tmp:
         o = Path(tmp) / "kernels.o"
@@ -128,7 +130,7 @@ def link_shared(obj: bytes, so_path: Path) -> None:
         # mapped keeps a valid file
         out = so_path.with_name(f".{so_path.name}.{os.getpid()}.tmp")
         try:
-            r = subprocess.run([cc, "-shared", "-o", str(out), str(o), "-lm"],
+            r = subprocess.run([cc, "-shared", "-o", str(out), str(o), *extra, "-lm"],
                                capture_output=True, text=True)
         except OSError as e:
             raise CompileError(f"cannot run the C compiler `{cc}`: {e}") from None
@@ -159,8 +161,13 @@ def build_library(module: ir.Module, target: Target | str, out_dir: str | os.Pat
         if p.exists() and not p.is_file():
             raise CompileError(f"cannot write `{p}`: it exists and is not a regular file")
     obj = emit_object(module, t)
+    extra: list[str] = []
+    if uses_embree(module):
+        from ...runtime.embree import link_args
+
+        extra = link_args()
     try:
-        link_shared(obj, paths["so"])
+        link_shared(obj, paths["so"], extra)
         paths["header"].write_text(header(module, t, stem))
         paths["manifest"].write_text(json.dumps(manifest(module, t), indent=1) + "\n")
     except OSError as e:

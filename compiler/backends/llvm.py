@@ -24,7 +24,10 @@ from ..diagnostics import CompileError
 from ..targets import Target, get_target
 from .base import Backend, c_name, kernels, result_names
 from .llvm_entry import emit_kernel
-from .llvm_ops import I32, Lowering, const, ll_type
+from .llvm_ops import I32, LOWER, Lowering, const, ll_type
+from .llvm_rays import RAY_LOWER
+
+LOWER.update(RAY_LOWER)  # ray queries (Embree) are lowered in their own file
 
 
 class LLVMBackend(Backend):

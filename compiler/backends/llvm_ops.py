@@ -463,3 +463,4 @@ LOWER: dict[ir.Op, Callable[[Lowering, ir.Instr], L.Value | list[L.Value] | None
     ir.Op.IF: _lower_if,
     ir.Op.LOOP: _lower_loop,
 }
+

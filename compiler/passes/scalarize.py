@@ -121,6 +121,11 @@ class Scalarize(Pass):
             return
         if op is Op.CALL:
             raise CompileError([Diagnostic(ins.loc, "internal: call survived inlining")])
+        if op in (Op.INTERSECT, Op.OCCLUDED):  # one instruction, leaves in and leaves out
+            types = [t for r in ins.results for t in _leaves_of(r.type)]
+            new = b.emit(op, [v for leaves in ops for v in leaves], types, ins.attrs)
+            self._bind_results(ins, new, env)
+            return
         if not ins.results:  # store
             b.emit(op, [leaves[0] for leaves in ops], [], ins.attrs)
             return

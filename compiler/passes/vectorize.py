@@ -125,7 +125,8 @@ class _FunctionVectorizer:
                         changed |= self._mark(arg)
                         changed |= self._mark(res)
                 changed |= self._analyze_block(body)
-            elif ins.results and any(v in self.varying for v in ins.operands):
+            elif ins.results and (ins.op in (Op.INTERSECT, Op.OCCLUDED)
+                                  or any(v in self.varying for v in ins.operands)):
                 for r in ins.results:
                     changed |= self._mark(r)
         return changed
@@ -198,6 +199,13 @@ class _FunctionVectorizer:
             idx = self._get(b, ins.operands[1], True)
             val = self._get(b, ins.operands[2], True)
             b.emit(Op.SCATTER, [buf, idx, val, mask], [])
+            return
+        if op in (Op.INTERSECT, Op.OCCLUDED):  # ray queries take the execution mask
+            ops = [self._get(b, v, True) for v in ins.operands]
+            new = b.emit(op, ops + [mask], [r.type.with_lanes(self.W) for r in ins.results],
+                         ins.attrs)
+            for r, n in zip(ins.results, new.results):
+                self.env[r] = n
             return
         is_varying = any(r in self.varying for r in ins.results)
         ops = [self._get(b, v, is_varying) for v in ins.operands]
