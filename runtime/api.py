@@ -75,6 +75,16 @@ class Module:
         return (f"<rdsl.Module {self.path or ''} target={self.target} width={self.width} "
                 f"kernels=[{', '.join(self.kernels)}]>")
 
+    def bind_scene(self, scene: Any) -> None:
+        """Point the library's ray queries (`trace`, `occluded`) at an Embree scene (an
+        :class:`rdsl.runtime.embree.EmbreeScene`); kept alive as long as this module."""
+        try:
+            slot = ctypes.c_void_p.in_dll(self._lib, "rdsl_embree_scene")
+        except ValueError:
+            raise ValueError("this library traces no rays, so it takes no scene") from None
+        slot.value = scene.handle
+        self._scene = scene
+
     def __getitem__(self, name: str) -> Kernel:
         try:
             return self.kernels[name]
