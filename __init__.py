@@ -14,4 +14,12 @@ def __getattr__(name: str):
         from .runtime import api
 
         return getattr(api, name)
+    if name in ("load_scene", "Scene"):
+        from .runtime.render import renderer
+
+        return getattr(renderer, name)
+    if name in ("write_image", "read_exr"):
+        from .runtime.render import image
+
+        return getattr(image, name)
     raise AttributeError(name)

@@ -40,13 +40,30 @@ def _parser() -> argparse.ArgumentParser:
                         "(default: the source's name in the current folder)")
     k.add_argument("--emit", choices=["lib", "llvm", "asm", "obj"], default="lib",
                    help="what to produce; llvm/asm go to stdout unless -o is given")
+    r = sub.add_parser("render", help="render a Mitsuba 3 XML scene")
+    r.add_argument("scene")
+    r.add_argument("-o", "--output", default=None,
+                   help="output EXR (default: the scene's name + .exr in the current "
+                        "folder); a tonemapped PNG is written beside it")
+    r.add_argument("--spp", type=int, default=None, help="samples per pixel (default: the "
+                   "scene's sampler)")
+    r.add_argument("--seed", type=int, default=None)
+    r.add_argument("--target", default="host")
+    r.add_argument("--variant", default="rgb")
+    r.add_argument("--threads", type=int, default=None, help="default: all cores")
+    r.add_argument("-D", dest="defines", action="append", default=[], metavar="NAME=VALUE",
+                   help="set a scene parameter declared with <default>")
+    r.add_argument("--report", action="store_true",
+                   help="print what specialization did and the kernel sizes")
+    r.add_argument("--quiet", action="store_true", help="no progress bar")
     return p
 
 
 def main(argv: list[str] | None = None) -> int:
     args = _parser().parse_args(argv)
     try:
-        return {"check": _check, "ir": _ir, "compile": _compile}[args.cmd](args)
+        return {"check": _check, "ir": _ir, "compile": _compile,
+                "render": _render}[args.cmd](args)
     except CompileError as e:
         print(e.format(), file=sys.stderr)
         return 1
@@ -145,6 +162,12 @@ def _compile(args: argparse.Namespace) -> int:
     for p in paths.values() if isinstance(paths, dict) else paths:
         print(f"wrote {p}")
     return 0
+
+
+def _render(args: argparse.Namespace) -> int:
+    from ..runtime.render.cli import render_command
+
+    return render_command(args)
 
 
 def _refuse_input(out: Path, src: Path) -> None:

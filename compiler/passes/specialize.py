@@ -50,6 +50,17 @@ class SceneSpec:
     emitters: list[Instance] = field(default_factory=list)
 
 
+def describe(scene: SceneSpec, placeholders: list[str] | None = None) -> list[str]:
+    """One line per placeholder: which instances its dispatch covers."""
+    out = []
+    for name in placeholders if placeholders is not None else list(PLACEHOLDERS):
+        kind, _ = PLACEHOLDERS[name]
+        instances: list[Instance] = getattr(scene, kind)
+        used = sorted({i.plugin for i in instances})
+        out.append(f"{name}: {len(instances)} instance(s) of {', '.join(used) or 'nothing'}")
+    return out
+
+
 @register
 class Specialize(Pass):
     name = "specialize"
@@ -63,11 +74,9 @@ class Specialize(Pass):
             stub = module.functions.get(stub_name)
             if stub is None:
                 continue
-            instances: list[Instance] = getattr(self.scene, kind)
-            self._dispatch(module, stub, instances, method)
-            used = sorted({i.plugin for i in instances})
-            self.report.append(f"{stub_name}: {len(instances)} instance(s) of "
-                               f"{', '.join(used) or 'nothing'}")
+            self._dispatch(module, stub, getattr(self.scene, kind), method)
+        self.report.extend(describe(self.scene, [n for n in PLACEHOLDERS
+                                                 if n in module.functions]))
 
     def _dispatch(self, module: Module, stub: Function, instances: list[Instance],
                   method: str) -> None:

@@ -1,0 +1,65 @@
+"""``rdsl render``: load a scene, compile its kernels (or load them from the cache), render
+with a progress bar, write EXR plus a PNG preview, and end with a one-line summary."""
+
+from __future__ import annotations
+
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+from ...compiler.diagnostics import CompileError
+from .image import write_exr, write_png
+from .progress import summary_line
+
+
+def render_command(args: Any) -> int:
+    from ..scene.xml import parse_defines
+    from .renderer import load_scene
+
+    scene_path = Path(args.scene)
+    if not scene_path.is_file():
+        raise CompileError(f"{scene_path}: error: no such scene file")
+    out = Path(args.output) if args.output else Path(scene_path.stem + ".exr")
+    if out.suffix.lower() != ".exr":
+        out = out.with_suffix(".exr")
+    png = out.with_suffix(".png")
+    for target in (out, png):
+        if target.resolve() == scene_path.resolve():
+            raise CompileError(f"{target}: error: refusing to overwrite the input scene")
+    defines = parse_defines(args.defines)
+
+    t0 = time.perf_counter()
+    scene = load_scene(scene_path, variant=args.variant, target=args.target, **defines)
+    t_load = time.perf_counter() - t0
+    if not scene.buffers.nlight:
+        print(f"{scene_path}: warning: the scene has no emitters; the image will be black",
+              file=sys.stderr)
+    mod = scene.compile()
+    how = "kernels from cache" if scene.from_cache else \
+        f"compiled in {scene.compile_seconds:.2f} s"
+    if args.report:
+        for line in scene.report:
+            print(f"specialize: {line}")
+        k = mod.manifest["kernels"]
+        print(f"kernels: {', '.join(x['name'] for x in k)} for `{mod.target}` "
+              f"(width {mod.width}, variant {mod.variant})")
+    spp = args.spp or scene.spp
+    t1 = time.perf_counter()
+    img = scene.render(spp=spp, seed=args.seed, threads=args.threads,
+                       progress=not args.quiet)
+    t_render = time.perf_counter() - t1
+    if scene.nonfinite:
+        print(f"warning: {scene.nonfinite} samples were NaN or infinite and were left out of "
+              "the image", file=sys.stderr)
+    try:
+        out.parent.mkdir(parents=True, exist_ok=True)
+        write_exr(out, img)
+        write_png(png, img)
+    except OSError as e:
+        raise CompileError(f"{out}: error: cannot write the image: {e.strerror or e}") from None
+    h, w = img.shape[:2]
+    paths = h * w * spp
+    print(summary_line(f"{scene_path.name}: {w}x{h}, {spp} spp", t_render, paths, "paths",
+                       f"scene {t_load:.2f} s, {how}; wrote {out} and {png.name}"))
+    return 0

@@ -1,0 +1,284 @@
+"""Render a Mitsuba scene with compiled rdsl kernels.
+
+Python's part is set-up and bookkeeping only: it loads the scene, flattens its triangles
+into buffers, builds the Embree scene, writes the scene's render kernel (a few lines of
+rdsl that call the stdlib integrator, camera and film with the scene's constants) and runs
+it in batches of samples.  Every per-sample computation happens in compiled rdsl code:
+camera rays, intersection (Embree, called from the kernel), shading, light sampling and
+the film's reconstruction filter.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ...compiler.diagnostics import CompileError
+from ...compiler.passes.specialize import Instance, SceneSpec, describe
+from ..scene import load_scene_description
+from .camera import camera_uniforms
+from .film import develop, film_uniforms, new_accumulator
+from .progress import Progress
+
+# Mitsuba plugin -> (rdsl file under stdlib/, parameter conversions)
+BSDF_PLUGINS = {"diffuse": "bsdf.diffuse", "roughconductor": "bsdf.roughconductor",
+                "conductor": "bsdf.conductor", "dielectric": "bsdf.dielectric",
+                "thindielectric": "bsdf.thindielectric", "plastic": "bsdf.plastic",
+                "roughplastic": "bsdf.roughplastic", "roughdielectric": "bsdf.roughdielectric"}
+EMITTER_PLUGINS = {"area": "emitter.area"}
+INTEGRATORS = ("path",)
+BATCH_SAMPLES = 1 << 20  # samples per kernel call: bounds the memory of the sample buffers
+
+
+@dataclass
+class SceneBuffers:
+    """The scene's triangles and lights, flattened for the kernels (layout in
+    stdlib/render/geometry.rdsl and stdlib/render/path.rdsl)."""
+
+    P: np.ndarray
+    N: np.ndarray
+    UV: np.ndarray
+    F: np.ndarray
+    G: np.ndarray
+    LC: np.ndarray
+    LT: np.ndarray
+    light_area: float
+    meshes: list[tuple[np.ndarray, np.ndarray]] = field(default_factory=list)
+
+    @property
+    def nlight(self) -> int:
+        return len(self.LC)
+
+    def args(self) -> list[np.ndarray]:
+        return [self.P, self.N, self.UV, self.F, self.G, self.LC, self.LT]
+
+
+def _rgb(value: Any, what: str) -> tuple[float, float, float] | float:
+    rgb = getattr(value, "rgb", None)
+    if rgb is not None:
+        return tuple(float(x) for x in rgb)
+    if isinstance(value, (int, float)):
+        return float(value)
+    raise CompileError(f"{what}: textures are not supported by the renderer yet")
+
+
+def _bsdf_instance(plugin: Any) -> Instance:
+    if plugin.type not in BSDF_PLUGINS:
+        raise CompileError(f"bsdf `{plugin.type}` is not supported by the renderer yet "
+                           f"(supported: {', '.join(sorted(BSDF_PLUGINS))})", plugin.loc)
+    params: dict[str, Any] = {}
+    for name, value in plugin.params.items():
+        if hasattr(value, "rgb") or name.endswith(("reflectance", "transmittance")):
+            params[name] = _rgb(value, f"{plugin.type}.{name}")
+        elif isinstance(value, (bool, int, float)):
+            params[name] = value
+    return Instance(plugin.type, params, plugin.id or plugin.type)
+
+
+def flatten(desc: Any) -> tuple[SceneBuffers, list[Instance], list[Instance]]:
+    """Concatenate the scene's meshes and collect its BSDF and emitter instances."""
+    P, N, UV, F, G = [], [], [], [], []
+    bsdfs: list[Instance] = []
+    bsdf_ids: dict[int, int] = {}
+    emitters: list[Instance] = []
+    lights: list[tuple[int, int, float]] = []  # (triangle, shape, area)
+    nv = nt = 0
+    meshes = []
+    for shape_index, shape in enumerate(desc.shapes):
+        m = shape.mesh
+        v = np.ascontiguousarray(m.vertices, np.float32)
+        f = np.ascontiguousarray(m.faces, np.uint32)
+        meshes.append((v, f))
+        flags = 0
+        P.append(v.reshape(-1))
+        if m.normals is not None and not m.face_normals:
+            N.append(np.asarray(m.normals, np.float32).reshape(-1))
+            flags |= 1
+        else:
+            N.append(np.zeros(3 * len(v), np.float32))
+        if m.uvs is not None:
+            UV.append(np.asarray(m.uvs, np.float32).reshape(-1))
+            flags |= 2
+        else:
+            UV.append(np.zeros(2 * len(v), np.float32))
+        F.append((f.astype(np.int64) + nv).astype(np.int32).reshape(-1))
+        key = id(shape.bsdf)
+        if key not in bsdf_ids:
+            bsdf_ids[key] = len(bsdfs)
+            bsdfs.append(_bsdf_instance(shape.bsdf))
+        emitter = -1
+        if shape.emitter is not None:
+            em = shape.emitter
+            if em.type not in EMITTER_PLUGINS:
+                raise CompileError(f"emitter `{em.type}` is not supported by the renderer yet",
+                                   em.loc)
+            emitter = len(emitters)
+            emitters.append(Instance(em.type, {"radiance": _rgb(em.params["radiance"],
+                                                                "area.radiance")}))
+            tri = v[f]
+            areas = 0.5 * np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]),
+                                         axis=1)
+            lights += [(nt + i, shape_index, float(a)) for i, a in enumerate(areas) if a > 0]
+        G.append(np.array([nt, bsdf_ids[key], emitter, flags], np.int32))
+        nv += len(v)
+        nt += len(f)
+    for em in desc.emitters:
+        if em.type != "area":
+            raise CompileError(f"emitter `{em.type}` is not supported by the renderer yet "
+                               "(supported: area)", em.loc)
+    areas = np.array([a for _, _, a in lights], np.float64)
+    total = float(areas.sum())
+    cdf = np.cumsum(areas) / total if total > 0 else np.zeros(0)
+    if len(cdf):
+        cdf[-1] = 1.0
+    LT = np.array([[t, s] for t, s, _ in lights], np.int32).reshape(-1)
+    cat = (lambda xs, dt: np.ascontiguousarray(np.concatenate(xs) if xs else np.zeros(0, dt),
+                                               dt))
+    bufs = SceneBuffers(cat(P, np.float32), cat(N, np.float32), cat(UV, np.float32),
+                        cat(F, np.int32), cat(G, np.int32), cdf.astype(np.float32),
+                        np.ascontiguousarray(LT, np.int32), total, meshes)
+    return bufs, bsdfs, emitters
+
+
+def _literal(value: Any, struct: str | None = None) -> str:
+    """An rdsl literal for a number, a vector (list) or a struct (dict)."""
+    if isinstance(value, dict):
+        nested = {"basis": "Frame"}
+        fields = ", ".join(f"{k}: {_literal(v, nested.get(k))}" for k, v in value.items())
+        return f"{struct} {{ {fields} }}"
+    if isinstance(value, (list, tuple, np.ndarray)):
+        return f"Vec{len(value)}(" + ", ".join(_literal(float(x)) for x in value) + ")"
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, (int, np.integer)):
+        return str(int(value))
+    text = repr(float(np.float32(value)))
+    return text if ("." in text or "e" in text or "n" in text) else text + ".0"
+
+
+def kernel_source(desc: Any, bufs: SceneBuffers, bsdfs: list[Instance],
+                  emitters: list[Instance]) -> str:
+    """The scene's render kernel in rdsl: constants of this scene, stdlib code for the rest."""
+    integ = desc.integrator
+    if integ.type not in INTEGRATORS:
+        raise CompileError(f"integrator `{integ.type}` is not supported by the renderer yet "
+                           f"(supported: {', '.join(INTEGRATORS)})", integ.loc)
+    cam = camera_uniforms(desc.sensor)
+    film = film_uniforms(desc.sensor.film, 1)
+    imports = sorted({BSDF_PLUGINS[b.plugin] for b in bsdfs}
+                     | {EMITTER_PLUGINS[e.plugin] for e in emitters})
+    lines = ["// generated by rdsl render for " + Path(desc.path).name,
+             "import render.path;", "import render.camera;", "import render.film;"]
+    lines += [f"import {m};" for m in imports]
+    lines += [
+        "",
+        "struct FilmSample { x: Float, y: Float, value: Spectrum }",
+        "",
+        "fn render_sample(cell: Int, s: Int, spp: Int, seed: UInt, P: [Float], N: [Float],",
+        "                 UV: [Float], F: [Int], G: [Int], LC: [Float], LT: [Int]) -> FilmSample {",
+        f"    let cam = {_literal(cam, 'Camera')};",
+        f"    let gx = cell % {film['grid_w']};",
+        f"    let gy = cell / {film['grid_w']};",
+        "    let stream = UInt64(cell) * UInt64(spp) + UInt64(s);",
+        "    let rng = pcg32_seed(UInt64(seed), stream);",
+        "    let (r1, u_pixel) = next_2d(rng);",
+        "    let (r2, u_lens) = next_2d(r1);",
+        f"    let pos = Vec2(Float({film['grid_x']} + gx) + u_pixel.x,",
+        f"                   Float({film['grid_y']} + gy) + u_pixel.y);",
+        "    let ray = camera_ray_px(cam, pos, u_lens);",
+        f"    let (L, r3) = path_li(ray, r2, {int(integ.params.get('max_depth', -1))}, "
+        f"{int(integ.params.get('rr_depth', 5))}, {bufs.nlight}, "
+        f"{_literal(max(bufs.light_area, 1e-30))},",
+        "                         P, N, UV, F, G, LC, LT);",
+        "    return FilmSample { x: pos.x, y: pos.y, value: L };",
+        "}",
+        "",
+        "fn film_pass(pixel: Int, film: Film, pos: [Float], values: [Float], acc: [Float]) -> Int {",
+        "    return film_accumulate(pixel, film, pos, values, acc);",
+        "}",
+        "",
+    ]
+    return "\n".join(lines)
+
+
+class Scene:
+    """A loaded scene, compiled for one variant and target.  ``render`` returns the image
+    as a float32 (H, W, C) array."""
+
+    def __init__(self, path: str | Path, variant: str = "rgb", target: str = "host",
+                 specialize: bool = True, **defaults: Any) -> None:
+        from ..embree import EmbreeScene
+
+        self.path = Path(path)
+        self.variant = variant
+        t0 = time.perf_counter()
+        self.desc = load_scene_description(self.path, **defaults)
+        self.spp = int(self.desc.sensor.sampler.params.get("sample_count", 4))
+        self.seed = int(self.desc.sensor.sampler.params.get("seed", 0))
+        self.buffers, self.bsdfs, self.emitters = flatten(self.desc)
+        self.load_seconds = time.perf_counter() - t0
+        self.embree = EmbreeScene(self.buffers.meshes)
+        self.target = target
+        self.specialize = specialize
+        self._module = None
+        self.report: list[str] = []
+        self.compile_seconds = 0.0
+        self.from_cache = False
+        self.nonfinite = 0
+
+    def compile(self):
+        """Compile (or load from the cache) the scene's kernels."""
+        from ...runtime.api import jit
+
+        if self._module is not None:
+            return self._module
+        src = kernel_source(self.desc, self.buffers, self.bsdfs, self.emitters)
+        scene = SceneSpec(self.bsdfs, self.emitters)
+        # the report is derived from the scene, so a cache hit can print it too
+        self.report = describe(scene)
+        mod = jit(src, target=self.target, variant=self.variant, scene=scene,
+                  filename=str(self.path.with_suffix(".rdsl")))
+        self._module = mod
+        self.compile_seconds = mod.compile_seconds
+        self.from_cache = mod.from_cache
+        return mod
+
+    def render(self, spp: int | None = None, seed: int | None = None,
+               threads: int | None = None, progress: bool = False) -> np.ndarray:
+        spp = int(spp or self.spp)
+        seed = self.seed if seed is None else int(seed)
+        mod = self.compile()
+        mod.bind_scene(self.embree)
+        film = film_uniforms(self.desc.sensor.film, 1, channels=3 if self.variant != "mono"
+                             else 1)
+        cells = film["grid_w"] * film["grid_h"]
+        batch = max(1, min(spp, BATCH_SAMPLES // max(cells, 1)))
+        acc = new_accumulator(dict(film, spp=batch))
+        pixels = np.arange(film["crop_w"] * film["crop_h"], dtype=np.int32)
+        self.nonfinite = 0
+        bar = Progress(spp, label="rendering", unit="spp", enabled=progress)
+        done = 0
+        while done < spp:
+            n = min(batch, spp - done)
+            cell = np.repeat(np.arange(cells, dtype=np.int32), n)
+            s = np.tile(np.arange(done, done + n, dtype=np.int32), cells)
+            out = mod["render_sample"](cell, s, spp, np.uint32(seed), *self.buffers.args(),
+                                       threads=threads)
+            pos = np.ascontiguousarray(np.stack([out["x"], out["y"]], axis=1).reshape(-1))
+            vals = np.ascontiguousarray(out["value"], np.float32).reshape(-1)
+            bad = mod["film_pass"](pixels, dict(film, spp=n), pos, vals, acc, threads=threads)
+            self.nonfinite += int(np.sum(bad))
+            done += n
+            bar.update(done)
+        bar.finish()
+        return develop(acc, dict(film, spp=spp))
+
+
+def load_scene(path: str | Path, variant: str = "rgb", target: str = "host",
+               **defaults: Any) -> Scene:
+    """Load a Mitsuba 3 XML scene for rendering (``-D name=value`` as keyword args)."""
+    return Scene(path, variant=variant, target=target, **defaults)
