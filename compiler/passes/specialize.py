@@ -4,11 +4,13 @@ Expects: a lowered module (before ``inline``) containing the scene placeholders 
 ``stdlib/render/scene.rdsl`` (``scene_bsdf_eval`` and friends) and the plugin functions of
 every plugin type the scene uses (``diffuse.eval``...).
 
-Guarantees: each placeholder's body is replaced by a dispatch over the scene's instances
-only (``if id == 0 { diffuse.eval(..., consts) } else if id == 1 { ... }``), falling
-through to the placeholder's own body for an unknown id.  Every instance parameter becomes
-a constant, so ``optimize`` folds what the scene fixes (a parameter equal to 0 or 1, a branch
-on a flag).  Plugins the scene does not use are never called, so ``inline`` drops them.
+Guarantees: each placeholder's body is replaced by a dispatch over the plugin types the
+scene's instances use (``if id == 0 || id == 2 { roughconductor.eval(...) } else {
+diffuse.eval(...) }``): one call per type, whose parameters are constants, or selects of
+constants by instance id when instances of a type differ.  ``optimize`` then folds what the
+scene fixes (a parameter equal to 0 or 1, a branch on a flag).  Ids must be ones of the
+scene's instances (the renderer guarantees it); a placeholder with no instances keeps its
+own body.  Plugins the scene does not use are never called, so ``inline`` drops them.
 ``report`` collects what was specialized, for ``rdsl render --report``.
 """
 
@@ -80,40 +82,66 @@ class Specialize(Pass):
 
     def _dispatch(self, module: Module, stub: Function, instances: list[Instance],
                   method: str) -> None:
+        """Dispatch over the plugin *types* of ``instances``; the parameters of one type's
+        instances are selected by id, so three diffuse materials cost one diffuse call."""
+        if not instances:
+            return  # the placeholder's own body stays
         ident, args = stub.params[0].value, [p.value for p in stub.params[1:]]
-        fallback = stub.body
-        ret = fallback.instrs.pop()
-        fallback.instrs.append(Instr(Op.YIELD, ret.operands, [], loc=ret.loc))
-        tail = fallback
-        for k in reversed(range(len(instances))):
-            inst = instances[k]
-            callee = module.functions.get(f"{inst.plugin}.{method}")
+        groups: dict[str, list[int]] = {}
+        for k, inst in enumerate(instances):
+            groups.setdefault(inst.plugin, []).append(k)
+        body = Block()
+        b = Builder(body, stub.loc)
+        tail: Block | None = None  # built from the last group backwards
+        for plugin, ids in reversed(list(groups.items())):
+            callee = module.functions.get(f"{plugin}.{method}")
             if callee is None:
-                raise CompileError(f"plugin `{inst.plugin}` has no function `{method}` "
+                raise CompileError(f"plugin `{plugin}` has no function `{method}` "
                                    "(is its file imported?)")
             then = Block()
             tb = Builder(then, stub.loc)
-            consts = [self._param_value(tb, p, inst) for p in callee.params[len(args):]]
-            call = tb.emit(Op.CALL, args + consts, list(callee.ret_types),
+            params = [self._param_value(tb, p, ident, [instances[k] for k in ids], ids)
+                      for p in callee.params[len(args):]]
+            call = tb.emit(Op.CALL, args + params, list(callee.ret_types),
                            {"callee": callee.name})
             tb.yield_(*call.results)
+            if tail is None:
+                tail = then  # the last type needs no test: ids come from the scene
+                continue
             block = Block()
             bb = Builder(block, stub.loc)
-            cond = bb.op(Op.EQ, BOOL, ident, bb.const(k, I32))
+            cond = None
+            for k in ids:
+                c = bb.op(Op.EQ, BOOL, ident, bb.const(k, I32))
+                cond = c if cond is None else bb.op(Op.OR, BOOL, cond, c)
             res = bb.emit(Op.IF, [cond], list(stub.ret_types), regions=[then, tail])
             bb.yield_(*res.results)
             tail = block
-        last = tail.instrs.pop()
-        tail.instrs.append(Instr(Op.RETURN, last.operands, [], loc=last.loc))
-        stub.body = tail
+        assert tail is not None
+        body.instrs = tail.instrs
+        last = body.instrs.pop()
+        body.instrs.append(Instr(Op.RETURN, last.operands, [], loc=last.loc))
+        stub.body = body
 
-    def _param_value(self, b: Builder, p: Param, inst: Instance) -> Value:
+    def _param_value(self, b: Builder, p: Param, ident: Value, group: list[Instance],
+                     ids: list[int]) -> Value:
+        """The parameter's constant, or a select over the group's instances by id."""
         name = p.value.name or "?"
-        value = inst.params.get(name, p.default)
-        if value is None:
-            raise CompileError(f"{inst.name or inst.plugin}: parameter `{name}` of "
-                               f"`{inst.plugin}` has no value and no default")
-        return _constant(b, p.value.type, value, f"{inst.plugin}.{name}")
+        values = []
+        for inst in group:
+            value = inst.params.get(name, p.default)
+            if value is None:
+                raise CompileError(f"{inst.name or inst.plugin}: parameter `{name}` of "
+                                   f"`{inst.plugin}` has no value and no default")
+            values.append(value)
+        what = f"{group[0].plugin}.{name}"
+        out = _constant(b, p.value.type, values[-1], what)
+        for k, value in zip(reversed(ids[:-1]), reversed(values[:-1])):
+            if value == values[-1]:
+                continue
+            c = b.op(Op.EQ, BOOL, ident, b.const(k, I32))
+            out = b.op(Op.SELECT, p.value.type, c, _constant(b, p.value.type, value, what), out)
+        return out
 
 
 def _constant(b: Builder, t: Type, value: Any, what: str) -> Value:
