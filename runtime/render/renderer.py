@@ -37,7 +37,8 @@ BSDF_PLUGINS = {"diffuse": "bsdf.diffuse", "roughconductor": "bsdf.roughconducto
                 "roughplastic": "bsdf.roughplastic", "roughdielectric": "bsdf.roughdielectric"}
 EMITTER_PLUGINS = {"area": "emitter.area"}
 INTEGRATORS = ("path",)
-BATCH_SAMPLES = 1 << 20  # samples per kernel call: bounds the memory of the sample buffers
+# samples per kernel call: small enough that a batch's sample buffers stay in cache
+BATCH_SAMPLES = 1 << 17
 
 
 @dataclass
