@@ -14,7 +14,6 @@ from typing import TextIO
 
 from .diagnostics import CompileError
 from .ir import Module
-from .sources import PRELUDE, STDLIB, is_path, source_files  # noqa: F401 (re-exported)
 from .passes import Pass
 from .passes.inline import Inline
 from .passes.lift import Lift
@@ -22,7 +21,7 @@ from .passes.optimize import Optimize
 from .passes.scalarize import Scalarize
 from .passes.specialize import SceneSpec, Specialize
 from .passes.vectorize import Vectorize
-
+from .sources import PRELUDE, STDLIB, is_path, source_files  # noqa: F401 (re-exported)
 
 
 class InternalError(Exception):

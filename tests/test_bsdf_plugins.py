@@ -206,6 +206,10 @@ def beckmann_g1_fit(wi, alpha):
 CHI2_CASES = (
     [("diffuse", {"reflectance": 0.7}, t) for t in THETAS]
     + [("roughconductor", {"alpha": a, **GOLD}, t) for a in ALPHAS for t in THETAS]
+    + [("roughconductor", {"alpha": a, "distribution": 1, **GOLD}, t) for a in (0.05, 0.7)
+       for t in (0.3, 1.45)]
+    + [("roughconductor", {"alpha": 0.1, "alpha_v": 0.5, "distribution": d, **GOLD}, t)
+       for d in (0, 1) for t in THETAS]
     + [("roughdielectric", {"alpha": a, "distribution": d}, t)
        for d in (0, 1) for a in ALPHAS for t in THETAS]
     + [("roughdielectric", {"alpha": a}, np.pi - t) for a in (0.05, 0.3) for t in (0.3, 1.0)]
@@ -219,7 +223,8 @@ CHI2_CASES = (
 
 def _case_id(c):
     name, params, theta = c
-    extra = ",".join(f"{k}={v}" for k, v in params.items() if k in ("alpha", "distribution"))
+    extra = ",".join(f"{k}={v}" for k, v in params.items()
+                     if k in ("alpha", "alpha_v", "distribution"))
     return f"{name}[{extra}]@{theta:.2f}"
 
 
@@ -233,11 +238,15 @@ def test_chi2(mods, case):
     valid = bs["pdf"] > 0
     lower = name in ("roughdielectric",)
     pdf = pdf_fn(mod, name, wi, **params)
-    if name == "roughdielectric" and params.get("distribution") == 1:
+    if name in ("roughdielectric", "roughconductor") and params.get("distribution") == 1:
         # pdf() uses the rational fit of Beckmann's G1(wi) (as Mitsuba), sample() the exact
         # visible-normal distribution: a constant factor (<= 0.35%) for a fixed wi, that
         # matters with 1e5 samples (the invalid-sample cell is 1 - the integral of pdf).
-        scale = beckmann_g1_exact(wi, params["alpha"]) / beckmann_g1_fit(wi, params["alpha"])
+        # (anisotropic: the roughness projected on wi's azimuth)
+        ax, ay = params["alpha"], params.get("alpha_v", params["alpha"])
+        phi = np.arctan2(wi[1], wi[0])
+        a = float(np.hypot(ax * np.cos(phi), ay * np.sin(phi)))
+        scale = beckmann_g1_exact(wi, a) / beckmann_g1_fit(wi, a)
         pdf = (lambda f, c: (lambda d: c * f(d)))(pdf, scale)
     p = chi2_directions(bs["wo"], valid, pdf, n, lower=lower,
                         res=(60, 40) if lower else (40, 40))
@@ -342,6 +351,8 @@ def test_thindielectric_delta(mods, theta):
 CONSISTENCY = (
     [("diffuse", {"reflectance": 0.7})]
     + [("roughconductor", {"alpha": a, **GOLD}) for a in ALPHAS]
+    + [("roughconductor", {"alpha": 0.05, "alpha_v": 0.6, "distribution": d, **GOLD})
+       for d in (0, 1)]
     + [("roughdielectric", {"alpha": a, "distribution": d}) for a in ALPHAS for d in (0, 1)]
     + [("roughplastic", {"alpha": a, "distribution": d}) for a in (0.05, 0.7) for d in (0, 1)]
     + [("plastic", {})]

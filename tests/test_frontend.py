@@ -396,7 +396,8 @@ bsdf diffuse {
     fn pdf(si: Surface, wo: Vec3) -> Float { return helper(wo.z) * inv_pi(); }
     fn sample(si: Surface, u1: Float, u2: Vec2) -> BsdfSample {
         let wo = Vec3(u2.x, u2.y, 1.0);
-        return BsdfSample { wo: wo, pdf: pdf(si, wo), eta: 1.0, weight: eval(si, wo) };
+        return BsdfSample { wo: wo, pdf: pdf(si, wo), eta: 1.0, weight: eval(si, wo),
+                            delta: false };
     }
     fn helper(c: Float) -> Float { return max(c, 0.0) * roughness; }
 }

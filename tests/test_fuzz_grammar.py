@@ -56,7 +56,8 @@ bsdf diffuse {
     fn pdf(si: Surface, wo: Vec3) -> Float { return max(wo.z, 0.0) * inv_pi(); }
     fn sample(si: Surface, u1: Float, u2: Vec2) -> BsdfSample {
         let wo = Vec3(u2.x, u2.y, sqrt(max(0.0, 1.0 - u2.x * u2.x - u2.y * u2.y)));
-        return BsdfSample { wo: wo, pdf: pdf(si, wo), eta: 1.0, weight: eval(si, wo) };
+        return BsdfSample { wo: wo, pdf: pdf(si, wo), eta: 1.0, weight: eval(si, wo),
+                            delta: false };
     }
 }
 """,

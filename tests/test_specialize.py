@@ -17,7 +17,9 @@ SRC = """
 import render.scene;
 import bsdf.diffuse;
 import bsdf.roughconductor;
-fn shade(id: Int, si: Surface, wo: Vec3) -> Spectrum { return scene_bsdf_eval(id, si, wo); }
+fn shade(id: Int, si: Surface, wo: Vec3, T: [Float]) -> Spectrum {
+    return scene_bsdf_eval(id, si, wo, T);
+}
 """
 SCENE = SceneSpec(bsdfs=[
     Instance("diffuse", {"reflectance": (0.8, 0.1, 0.1)}),
@@ -55,7 +57,7 @@ def test_dispatch_matches_the_plugins_own_kernels(target):
     si = surface(n, rng)
     wo = surface(n, rng)["wi"]
     ids = rng.integers(0, 3, n).astype(np.int32)
-    got = mod.shade(ids, si, wo)
+    got = mod.shade(ids, si, wo, np.zeros(3, np.float32))
     want = np.where(
         (ids == 0)[:, None], own_d["diffuse.eval"](si, wo, reflectance=(0.8, 0.1, 0.1)),
         np.where((ids == 1)[:, None], own_r["roughconductor.eval"](si, wo, alpha=0.3),

@@ -15,8 +15,8 @@ from .. import ir
 from ..diagnostics import CompileError
 from ..targets import Target, get_target
 from .base import c_args, c_name, c_prototype, kernels, result_names
-from .llvm_rays import uses_embree
 from .llvm import emit_object
+from .llvm_rays import uses_embree
 
 OUTPUT_SUFFIXES = (".so", ".h", ".json")
 

@@ -68,7 +68,7 @@ def _lower_query(lw: Lowering, ins: ir.Instr) -> list[L.Value]:
     def put(name: str, value: L.Value) -> None:
         b.store(value, field(name), align=4)
 
-    def splat(ty: L.Type, v: int | float) -> L.Value:
+    def splat(ty: L.Type, v: float) -> L.Value:
         return const(L.VectorType(ty, width) if packed else ty, v)
 
     for name, v in (("org_x", ox), ("org_y", oy), ("org_z", oz), ("dir_x", dx),

@@ -12,6 +12,16 @@ scene fixes (a parameter equal to 0 or 1, a branch on a flag).  Ids must be ones
 scene's instances (the renderer guarantees it); a placeholder with no instances keeps its
 own body.  Plugins the scene does not use are never called, so ``inline`` drops them.
 ``report`` collects what was specialized, for ``rdsl render --report``.
+
+A plugin method gets the placeholder's arguments after the id, except buffers (plugins
+cannot read buffers).  A method that needs them is written as a top-level function
+``{plugin}_{method}_buffers`` taking every argument after the id, buffers included, then
+the plugin's parameters by name (``bitmap_eval_buffers(si, T, offset, ...)``); when it
+exists the dispatch calls it instead of ``{plugin}.{method}``.  A parameter whose value is
+a :class:`TextureRef` becomes ``scene_texture_eval(k, ...)``, called with the placeholder's
+arguments of the same names (``si``, ``T``), whose own dispatch covers the scene's textures;
+since a texture param ``reflectance(si)`` evaluates to the param value, evaluating the
+texture at the same ``si`` first is the same thing.
 """
 
 from __future__ import annotations
@@ -20,8 +30,24 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from ..diagnostics import CompileError
-from ..ir import (BOOL, F32, I32, Block, Builder, Function, Instr, Module, Op, Param,
-                  ScalarType, SpectrumType, Type, Value, VecType)
+from ..ir import (
+    BOOL,
+    F32,
+    I32,
+    Block,
+    BufferType,
+    Builder,
+    Function,
+    Instr,
+    Module,
+    Op,
+    Param,
+    ScalarType,
+    SpectrumType,
+    Type,
+    Value,
+    VecType,
+)
 from . import Pass, register
 
 # placeholder function -> (instance list, plugin method)
@@ -30,7 +56,20 @@ PLACEHOLDERS = {
     "scene_bsdf_pdf": ("bsdfs", "pdf"),
     "scene_bsdf_sample": ("bsdfs", "sample"),
     "scene_emitter_eval": ("emitters", "eval"),
+    "scene_texture_eval": ("textures", "eval"),
+    # the BSDFs nested in combinators (twosided, blendbsdf, mask): stdlib/render/bsdf_leaf.rdsl
+    "scene_bsdf_leaf_eval": ("bsdf_leaves", "eval"),
+    "scene_bsdf_leaf_pdf": ("bsdf_leaves", "pdf"),
+    "scene_bsdf_leaf_sample": ("bsdf_leaves", "sample"),
 }
+TEXTURE_PLACEHOLDER = "scene_texture_eval"
+
+
+@dataclass(frozen=True)
+class TextureRef:
+    """A parameter value that is the scene's texture ``index`` (in ``SceneSpec.textures``)."""
+
+    index: int
 
 
 @dataclass
@@ -42,6 +81,9 @@ class Instance:
     plugin: str
     params: dict[str, Any] = field(default_factory=dict)
     name: str = ""
+    # a combinator's nested instances (twosided, blendbsdf, mask), before the renderer moves
+    # them to ``SceneSpec.bsdf_leaves`` and sets the combinator's leaf-id parameters
+    children: list[Instance] = field(default_factory=list)
 
 
 @dataclass
@@ -50,6 +92,8 @@ class SceneSpec:
 
     bsdfs: list[Instance] = field(default_factory=list)
     emitters: list[Instance] = field(default_factory=list)
+    textures: list[Instance] = field(default_factory=list)
+    bsdf_leaves: list[Instance] = field(default_factory=list)  # nested in combinators
 
 
 def describe(scene: SceneSpec, placeholders: list[str] | None = None) -> list[str]:
@@ -87,22 +131,28 @@ class Specialize(Pass):
         if not instances:
             return  # the placeholder's own body stays
         ident, args = stub.params[0].value, [p.value for p in stub.params[1:]]
+        plain = [a for a in args if not isinstance(a.type, BufferType)]
         groups: dict[str, list[int]] = {}
         for k, inst in enumerate(instances):
             groups.setdefault(inst.plugin, []).append(k)
         body = Block()
-        b = Builder(body, stub.loc)
         tail: Block | None = None  # built from the last group backwards
         for plugin, ids in reversed(list(groups.items())):
-            callee = module.functions.get(f"{plugin}.{method}")
+            own = module.functions.get(f"{plugin}.{method}")
+            callee, lead = module.functions.get(f"{plugin}_{method}_buffers"), args
+            if callee is None:
+                callee, lead = own, plain
             if callee is None:
                 raise CompileError(f"plugin `{plugin}` has no function `{method}` "
                                    "(is its file imported?)")
+            defaults = {p.value.name: p.default for p in own.params} if own else {}
             then = Block()
             tb = Builder(then, stub.loc)
-            params = [self._param_value(tb, p, ident, [instances[k] for k in ids], ids)
-                      for p in callee.params[len(args):]]
-            call = tb.emit(Op.CALL, args + params, list(callee.ret_types),
+            textures: dict[int, Value] = {}
+            params = [self._param_value(tb, p, ident, [instances[k] for k in ids], ids,
+                                        defaults.get(p.value.name), module, stub, textures)
+                      for p in callee.params[len(lead):]]
+            call = tb.emit(Op.CALL, lead + params, list(callee.ret_types),
                            {"callee": callee.name})
             tb.yield_(*call.results)
             if tail is None:
@@ -124,24 +174,60 @@ class Specialize(Pass):
         stub.body = body
 
     def _param_value(self, b: Builder, p: Param, ident: Value, group: list[Instance],
-                     ids: list[int]) -> Value:
-        """The parameter's constant, or a select over the group's instances by id."""
+                     ids: list[int], default: Any, module: Module, stub: Function,
+                     textures: dict[int, Value]) -> Value:
+        """The parameter's constant (or texture call), or a select over the group's instances
+        by id."""
         name = p.value.name or "?"
+        default = p.default if p.default is not None else default
         values = []
         for inst in group:
-            value = inst.params.get(name, p.default)
+            value = inst.params.get(name, default)
             if value is None:
                 raise CompileError(f"{inst.name or inst.plugin}: parameter `{name}` of "
                                    f"`{inst.plugin}` has no value and no default")
             values.append(value)
         what = f"{group[0].plugin}.{name}"
-        out = _constant(b, p.value.type, values[-1], what)
+
+        def value_of(value: Any) -> Value:
+            if not isinstance(value, TextureRef):
+                return _constant(b, p.value.type, value, what)
+            if value.index not in textures:
+                textures[value.index] = self._texture(b, value.index, module, stub, what)
+            return textures[value.index]
+
+        if not isinstance(p.value.type, SpectrumType) and any(
+                isinstance(v, TextureRef) for v in values):
+            raise CompileError(f"{what}: a texture can only set a `Texture` parameter "
+                               f"(this one is `{p.value.type}`)")
+        out = value_of(values[-1])
         for k, value in zip(reversed(ids[:-1]), reversed(values[:-1])):
             if value == values[-1]:
                 continue
             c = b.op(Op.EQ, BOOL, ident, b.const(k, I32))
-            out = b.op(Op.SELECT, p.value.type, c, _constant(b, p.value.type, value, what), out)
+            out = b.op(Op.SELECT, p.value.type, c, value_of(value), out)
         return out
+
+    def _texture(self, b: Builder, index: int, module: Module, stub: Function,
+                 what: str) -> Value:
+        """``scene_texture_eval(index, ...)`` with ``stub``'s arguments of the same names."""
+        tex = module.functions.get(TEXTURE_PLACEHOLDER)
+        if not 0 <= index < len(self.scene.textures):
+            raise CompileError(f"{what}: texture {index} is not one of the scene's "
+                               f"{len(self.scene.textures)} texture(s)")
+        if tex is None or stub.name == TEXTURE_PLACEHOLDER:
+            why = ("textures of textures are not supported" if tex is not None
+                   else f"`{TEXTURE_PLACEHOLDER}` is not defined (import render.scene)")
+            raise CompileError(f"{what}: cannot evaluate a texture here: {why}")
+        ours = {p.value.name: p.value for p in stub.params}
+        operands = [b.const(index, I32)]
+        for p in tex.params[1:]:
+            v = ours.get(p.value.name)
+            if v is None or v.type != p.value.type:
+                raise CompileError(f"{what}: a texture needs the argument `{p.value.name}: "
+                                   f"{p.value.type}`, which `{stub.name}` does not have")
+            operands.append(v)
+        return b.emit(Op.CALL, operands, list(tex.ret_types), {"callee": tex.name}).result
 
 
 def _constant(b: Builder, t: Type, value: Any, what: str) -> Value:

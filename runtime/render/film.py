@@ -70,3 +70,9 @@ def develop(acc: np.ndarray, film: dict[str, Any]) -> np.ndarray:
     a = np.asarray(acc, np.float32).reshape(film["crop_h"], film["crop_w"], c + 1)
     w = a[..., c:]
     return (a[..., :c] / np.where(w == 0, np.float32(1), w)).astype(np.float32)
+
+
+def film_reach(film: dict[str, Any]) -> int:
+    """Columns (rows) a sample reaches on each side of its cell (as `film_reach` in rdsl)."""
+    radius = {0: 0.5, 1: film["filter_param"]}.get(film["filter"], 4.0 * film["filter_param"])
+    return int(np.ceil(np.float32(radius) + np.float32(0.5))) - 1

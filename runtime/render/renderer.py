@@ -20,21 +20,13 @@ import numpy as np
 from ...compiler.diagnostics import CompileError
 from ...compiler.passes.specialize import Instance, SceneSpec, describe
 from ..scene import load_scene_description
+from .bsdfs import BSDF_PLUGINS, bsdf_instance, split_leaves
 from .camera import camera_uniforms
-from .film import develop, film_uniforms, new_accumulator
-
-
-def film_reach(film: dict[str, Any]) -> int:
-    """Columns (rows) a sample reaches on each side of its cell (as `film_reach` in rdsl)."""
-    radius = {0: 0.5, 1: film["filter_param"]}.get(film["filter"], 4.0 * film["filter_param"])
-    return int(np.ceil(np.float32(radius) + np.float32(0.5))) - 1
+from .emitters import EmitterTables, emitter_tables
+from .film import develop, film_reach, film_uniforms, new_accumulator
 from .progress import Progress
+from .textures import TEXTURE_PLUGINS, TextureTable
 
-# Mitsuba plugin -> (rdsl file under stdlib/, parameter conversions)
-BSDF_PLUGINS = {"diffuse": "bsdf.diffuse", "roughconductor": "bsdf.roughconductor",
-                "conductor": "bsdf.conductor", "dielectric": "bsdf.dielectric",
-                "thindielectric": "bsdf.thindielectric", "plastic": "bsdf.plastic",
-                "roughplastic": "bsdf.roughplastic", "roughdielectric": "bsdf.roughdielectric"}
 EMITTER_PLUGINS = {"area": "emitter.area"}
 INTEGRATORS = ("path",)
 # samples per kernel call: small enough that a batch's sample buffers stay in cache
@@ -44,24 +36,26 @@ BATCH_SAMPLES = 1 << 17
 @dataclass
 class SceneBuffers:
     """The scene's triangles and lights, flattened for the kernels (layout in
-    stdlib/render/geometry.rdsl and stdlib/render/path.rdsl)."""
+    stdlib/render/geometry.rdsl and stdlib/render/lights.rdsl)."""
 
     P: np.ndarray
     N: np.ndarray
     UV: np.ndarray
     F: np.ndarray
     G: np.ndarray
-    LC: np.ndarray
-    LT: np.ndarray
-    light_area: float
+    lights: EmitterTables  # LC, LT and the emitter tables
     meshes: list[tuple[np.ndarray, np.ndarray]] = field(default_factory=list)
+    T: np.ndarray = field(default_factory=lambda: np.zeros(3, np.float32))  # texels
+    textures: list[Instance] = field(default_factory=list)
 
     @property
     def nlight(self) -> int:
-        return len(self.LC)
+        """The number of emitters (an area-lit shape counts as one)."""
+        return self.lights.nemitter
 
     def args(self) -> list[np.ndarray]:
-        return [self.P, self.N, self.UV, self.F, self.G, self.LC, self.LT]
+        return [self.P, self.N, self.UV, self.F, self.G, self.lights.LC, self.lights.LT,
+                self.T, *self.lights.args()]
 
 
 def _rgb(value: Any, what: str) -> tuple[float, float, float] | float:
@@ -73,17 +67,9 @@ def _rgb(value: Any, what: str) -> tuple[float, float, float] | float:
     raise CompileError(f"{what}: textures are not supported by the renderer yet")
 
 
-def _bsdf_instance(plugin: Any) -> Instance:
-    if plugin.type not in BSDF_PLUGINS:
-        raise CompileError(f"bsdf `{plugin.type}` is not supported by the renderer yet "
-                           f"(supported: {', '.join(sorted(BSDF_PLUGINS))})", plugin.loc)
-    params: dict[str, Any] = {}
-    for name, value in plugin.params.items():
-        if hasattr(value, "rgb") or name.endswith(("reflectance", "transmittance")):
-            params[name] = _rgb(value, f"{plugin.type}.{name}")
-        elif isinstance(value, (bool, int, float)):
-            params[name] = value
-    return Instance(plugin.type, params, plugin.id or plugin.type)
+def _bsdf_instance(plugin: Any, textures: TextureTable | None = None) -> Instance:
+    """Parameter mapping and combinators: runtime/render/bsdfs.py."""
+    return bsdf_instance(plugin, textures)
 
 
 def flatten(desc: Any) -> tuple[SceneBuffers, list[Instance], list[Instance]]:
@@ -91,6 +77,7 @@ def flatten(desc: Any) -> tuple[SceneBuffers, list[Instance], list[Instance]]:
     P, N, UV, F, G = [], [], [], [], []
     bsdfs: list[Instance] = []
     bsdf_ids: dict[int, int] = {}
+    textures = TextureTable()
     emitters: list[Instance] = []
     lights: list[tuple[int, int, float]] = []  # (triangle, shape, area)
     nv = nt = 0
@@ -116,7 +103,7 @@ def flatten(desc: Any) -> tuple[SceneBuffers, list[Instance], list[Instance]]:
         key = id(shape.bsdf)
         if key not in bsdf_ids:
             bsdf_ids[key] = len(bsdfs)
-            bsdfs.append(_bsdf_instance(shape.bsdf))
+            bsdfs.append(_bsdf_instance(shape.bsdf, textures))
         emitter = -1
         if shape.emitter is not None:
             em = shape.emitter
@@ -129,25 +116,16 @@ def flatten(desc: Any) -> tuple[SceneBuffers, list[Instance], list[Instance]]:
             tri = v[f]
             areas = 0.5 * np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]),
                                          axis=1)
-            lights += [(nt + i, shape_index, float(a)) for i, a in enumerate(areas) if a > 0]
+            lights += [(nt + i, shape_index, float(a)) for i, a in enumerate(areas)]
         G.append(np.array([nt, bsdf_ids[key], emitter, flags], np.int32))
         nv += len(v)
         nt += len(f)
-    for em in desc.emitters:
-        if em.type != "area":
-            raise CompileError(f"emitter `{em.type}` is not supported by the renderer yet "
-                               "(supported: area)", em.loc)
-    areas = np.array([a for _, _, a in lights], np.float64)
-    total = float(areas.sum())
-    cdf = np.cumsum(areas) / total if total > 0 else np.zeros(0)
-    if len(cdf):
-        cdf[-1] = 1.0
-    LT = np.array([[t, s] for t, s, _ in lights], np.int32).reshape(-1)
     cat = (lambda xs, dt: np.ascontiguousarray(np.concatenate(xs) if xs else np.zeros(0, dt),
                                                dt))
     bufs = SceneBuffers(cat(P, np.float32), cat(N, np.float32), cat(UV, np.float32),
-                        cat(F, np.int32), cat(G, np.int32), cdf.astype(np.float32),
-                        np.ascontiguousarray(LT, np.int32), total, meshes)
+                        cat(F, np.int32), cat(G, np.int32),
+                        emitter_tables(desc, lights, len(emitters)), meshes)
+    bufs.T, bufs.textures = textures.buffer(), textures.instances
     return bufs, bsdfs, emitters
 
 
@@ -176,8 +154,9 @@ def kernel_source(desc: Any, bufs: SceneBuffers, bsdfs: list[Instance],
                            f"(supported: {', '.join(INTEGRATORS)})", integ.loc)
     cam = camera_uniforms(desc.sensor)
     film = film_uniforms(desc.sensor.film, 1, channels=channels)
-    imports = sorted({BSDF_PLUGINS[b.plugin] for b in bsdfs}
-                     | {EMITTER_PLUGINS[e.plugin] for e in emitters})
+    imports = sorted({BSDF_PLUGINS[x.plugin] for b in bsdfs for x in [b, *b.children]}
+                     | {EMITTER_PLUGINS[e.plugin] for e in emitters}
+                     | {TEXTURE_PLUGINS[t.plugin] for t in bufs.textures})
     lines = ["// generated by rdsl render for " + Path(desc.path).name,
              "import render.path;", "import render.camera;", "import render.film;"]
     lines += [f"import {m};" for m in imports]
@@ -189,7 +168,8 @@ def kernel_source(desc: Any, bufs: SceneBuffers, bsdfs: list[Instance],
         f"struct FilmSample {{ value: Spectrum, bad: Bool, {wfields} }}",
         "",
         "fn render_sample(cell: Int, s: Int, spp: Int, seed: UInt, P: [Float], N: [Float],",
-        "                 UV: [Float], F: [Int], G: [Int], LC: [Float], LT: [Int]) -> FilmSample {",
+        "                 UV: [Float], F: [Int], G: [Int], LC: [Float], LT: [Int],",
+        "                 T: [Float], EK: [Int], E: [Float], ENV: [Float]) -> FilmSample {",
         f"    let cam = {_literal(cam, 'Camera')};",
         f"    let film = {_literal(dict(film, spp=1), 'Film')};",
         f"    let gx = cell % {film['grid_w']} + {film['grid_x']};",
@@ -201,9 +181,8 @@ def kernel_source(desc: Any, bufs: SceneBuffers, bsdfs: list[Instance],
         "    let pos = Vec2(Float(gx) + u_pixel.x, Float(gy) + u_pixel.y);",
         "    let ray = camera_ray_px(cam, pos, u_lens);",
         f"    let (L, r3) = path_li(ray, r2, {int(integ.params.get('max_depth', -1))}, "
-        f"{int(integ.params.get('rr_depth', 5))}, {bufs.nlight}, "
-        f"{_literal(max(bufs.light_area, 1e-30))},",
-        "                         P, N, UV, F, G, LC, LT);",
+        f"{int(integ.params.get('rr_depth', 5))}, {bufs.nlight}, {bufs.lights.env},",
+        "                         P, N, UV, F, G, LC, LT, T, EK, E, ENV);",
         "    // a NaN or infinite estimate is counted and left out (zero value and weights)",
         "    let ok = is_finite(mean(L));",
         "    let k = select(ok, 1.0, 0.0);",
@@ -260,7 +239,8 @@ class Scene:
             return self._module
         src = kernel_source(self.desc, self.buffers, self.bsdfs, self.emitters,
                             1 if self.variant == "mono" else 3)
-        scene = SceneSpec(self.bsdfs, self.emitters)
+        bsdfs, leaves = split_leaves(self.bsdfs)  # combinators reach leaves by id
+        scene = SceneSpec(bsdfs, self.emitters, self.buffers.textures, leaves)
         # the report is derived from the scene, so a cache hit can print it too
         self.report = describe(scene)
         mod = jit(src, target=self.target, variant=self.variant, scene=scene,

@@ -1,0 +1,203 @@
+"""The scene's emitters packed into the tables the integrator samples them from.
+
+Python only lays out parameters and precomputed tables here; the sampling and evaluation
+are rdsl (stdlib/render/lights.rdsl documents the layout of ``EK``, ``E``, ``LC``, ``LT``;
+stdlib/emitter/envmap.rdsl the one of ``ENV``).  Emitter ids are the area emitters first,
+in shape order (the ids ``scene_emitter_eval`` dispatches on), then the others in scene order.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ...compiler.diagnostics import CompileError
+
+KINDS = {"area": 0, "point": 1, "spot": 2, "directional": 3, "constant": 4, "envmap": 5}
+ENVIRONMENTS = ("constant", "envmap")
+STRIDE = 24  # floats per emitter in E (lights.rdsl: emitter_stride())
+LUMINANCE = np.array([0.212671, 0.715160, 0.072169])  # linear sRGB -> Y, as Mitsuba
+
+
+@dataclass
+class EmitterTables:
+    """Every emitter of the scene, for stdlib/render/lights.rdsl."""
+
+    LC: np.ndarray   # float32, per emissive triangle: cumulative area within its shape
+    LT: np.ndarray   # int32, 2 per emissive triangle: triangle, shape
+    EK: np.ndarray   # int32, 4 per emitter: kind, first LC entry, LC entries, 0
+    E: np.ndarray    # float32, STRIDE per emitter: parameters by kind
+    ENV: np.ndarray  # float32, the environment map's texels and CDFs
+    nemitter: int = 0
+    env: int = -1    # id of the environment emitter, -1 if none
+
+    def args(self) -> list[np.ndarray]:
+        return [self.EK, self.E, self.ENV]
+
+
+def _color(value: Any, what: str, loc: Any) -> np.ndarray:
+    rgb = getattr(value, "rgb", None)
+    if rgb is None:
+        if isinstance(value, (int, float)):
+            return np.full(3, float(value))
+        raise CompileError(f"{what}: a texture is not supported here (give an rgb or a "
+                           "spectrum)", loc)
+    return np.asarray(rgb, np.float64)
+
+
+def _linear_part(m: np.ndarray, what: str, loc: Any, rigid: bool) -> np.ndarray:
+    lin = np.asarray(m, np.float64)[:3, :3]
+    if abs(np.linalg.det(lin)) < 1e-12:
+        raise CompileError(f"{what}: 'to_world' is singular", loc)
+    if rigid and not np.allclose(lin.T @ lin, np.eye(3), atol=1e-4):
+        raise CompileError(f"{what}: 'to_world' must be a rotation (no scale or shear)", loc)
+    return lin
+
+
+def emitter_tables(desc: Any, lights: list[tuple[int, int, float]],
+                   area_emitters: int) -> EmitterTables:
+    """Tables for the scene's emitters.  ``lights`` holds (triangle, shape, area) for every
+    triangle of the area-lit shapes, in shape order; ``area_emitters`` counts those shapes."""
+    LC, LT, EK, E = [], [], [], []
+    # area emitters: one run of consecutive entries per shape
+    start = 0
+    while start < len(lights):
+        shape = lights[start][1]
+        end = start
+        while end < len(lights) and lights[end][1] == shape:
+            end += 1
+        areas = np.array([a for _, _, a in lights[start:end]], np.float64)
+        cum = np.cumsum(areas)
+        LC += list(cum)
+        LT += [(t, s) for t, s, _ in lights[start:end]]
+        EK.append((KINDS["area"], start, end - start, 0))
+        row = np.zeros(STRIDE)
+        row[0] = np.float32(cum[-1])
+        E.append(row)
+        start = end
+    assert len(EK) == area_emitters, (len(EK), area_emitters)
+    env, ENV = -1, np.zeros(1, np.float32)
+    for em in desc.emitters:
+        if em.type == "area":
+            continue
+        what = f"emitter `{em.type}`" + (f" ({em.id})" if em.id else "")
+        if em.type not in KINDS:
+            raise CompileError(f"{what} is not supported by the renderer yet (supported: "
+                               f"{', '.join(KINDS)})", em.loc)
+        if em.type in ENVIRONMENTS:
+            if env >= 0:
+                raise CompileError(f"{what}: only one environment emitter (constant or "
+                                   "envmap) can be specified per scene", em.loc)
+            env = len(EK)
+        row, table = _emitter_row(em, what)
+        if table is not None:
+            ENV = table
+        EK.append((KINDS[em.type], 0, 0, 0))
+        E.append(row)
+    # buffers are never empty (a kernel argument needs memory), the counts say what is used
+    return EmitterTables(
+        np.ascontiguousarray(LC or [0.0], np.float32),
+        np.ascontiguousarray(np.array(LT or [(0, 0)], np.int32).reshape(-1)),
+        np.ascontiguousarray(np.array(EK or [(0, 0, 0, 0)], np.int32).reshape(-1)),
+        np.ascontiguousarray(np.concatenate(E or [np.zeros(STRIDE)]), np.float32),
+        np.ascontiguousarray(ENV, np.float32), len(EK), env)
+
+
+def _emitter_row(em: Any, what: str) -> tuple[np.ndarray, np.ndarray | None]:
+    """The E row of one non-area emitter, and its ENV table for an envmap."""
+    p, row = em.params, np.zeros(STRIDE)
+    if em.type == "point":
+        row[0:3] = _color(p["intensity"], f"{what}: 'intensity'", em.loc)
+        row[3:6] = p["to_world"][:3, 3]
+    elif em.type == "spot":
+        if p.get("texture") is not None:
+            raise CompileError(f"{what}: a textured spot light ('texture') is not supported by "
+                               "the renderer yet", em.loc)
+        cutoff, beam = np.radians(p["cutoff_angle"]), np.radians(p["beam_width"])
+        if not 0.0 < cutoff <= np.pi:
+            raise CompileError(f"{what}: 'cutoff_angle' must be in (0, 180] degrees, got "
+                               f"{p['cutoff_angle']}", em.loc)
+        if not 0.0 <= beam <= cutoff:
+            raise CompileError(f"{what}: 'beam_width' ({p['beam_width']}) must be between 0 "
+                               f"and 'cutoff_angle' ({p['cutoff_angle']})", em.loc)
+        lin = _linear_part(p["to_world"], what, em.loc, rigid=False)
+        row[0:3] = _color(p["intensity"], f"{what}: 'intensity'", em.loc)
+        row[3:6] = p["to_world"][:3, 3]
+        row[6:15] = np.linalg.inv(lin).reshape(-1)
+        row[15:19] = (np.cos(cutoff), np.cos(beam), cutoff,
+                      1.0 / (cutoff - beam) if cutoff > beam else 3.0e38)
+    elif em.type == "directional":
+        row[0:3] = _color(p["irradiance"], f"{what}: 'irradiance'", em.loc)
+        row[3:6] = p["direction"]
+    elif em.type == "constant":
+        row[0:3] = _color(p["radiance"], f"{what}: 'radiance'", em.loc)
+    else:  # envmap
+        if p.get("filter_type", "bilinear") != "bilinear":
+            raise CompileError(f"{what}: filter_type '{p['filter_type']}' is not supported "
+                               "by the renderer yet (supported: bilinear)", em.loc)
+        lin = _linear_part(p["to_world"], what, em.loc, rigid=True)
+        image = read_bitmap(p["filename"], what, em.loc)
+        table, (w, h) = envmap_tables(image)
+        row[0:3] = (float(p["scale"]), w, h)
+        row[3:12] = lin.reshape(-1)
+        row[12:21] = np.linalg.inv(lin).reshape(-1)
+        return row, table
+    return row, None
+
+
+def read_bitmap(path: str | Path, what: str = "bitmap", loc: Any = None) -> np.ndarray:
+    """An image as linear float (H, W, 3): EXR as stored, 8-bit PNG/JPEG decoded from sRGB
+    (as Mitsuba's Bitmap does for emitters)."""
+    path = Path(path)
+    try:
+        if path.suffix.lower() == ".exr":
+            from .image import read_exr
+
+            img = np.asarray(read_exr(path), np.float64)
+        else:
+            try:
+                from PIL import Image
+            except ImportError:
+                raise CompileError(f"{what}: reading {path.suffix} images needs Pillow "
+                                   "(pip install pillow)", loc) from None
+            with Image.open(path) as im:
+                im = im.convert("RGBA" if "A" in im.getbands() else "RGB")
+                img = np.asarray(im, np.float64) / 255.0
+            img = np.where(img <= 0.04045, img / 12.92, ((img + 0.055) / 1.055) ** 2.4)
+    except OSError as e:
+        raise CompileError(f"{what}: cannot read `{path}`: {e}", loc) from None
+    if img.ndim == 2:
+        img = img[:, :, None]
+    if img.shape[2] == 1 or img.shape[2] == 2:
+        img = np.repeat(img[:, :, :1], 3, axis=2)
+    return np.ascontiguousarray(img[:, :, :3])
+
+
+def envmap_tables(image: np.ndarray) -> tuple[np.ndarray, tuple[int, int]]:
+    """ENV for a lat-long image (H, W, 3): texels, then the marginal and conditional CDFs
+    of the cells between texel rows and columns (stdlib/emitter/envmap.rdsl)."""
+    img = np.asarray(image, np.float64)
+    if img.shape[0] == 1:  # one row: constant in theta, two rows for the poles
+        img = np.concatenate([img, img], axis=0)
+    h, w = img.shape[:2]
+    if not np.all(np.isfinite(img)) or np.any(img < 0):
+        img = np.where(np.isfinite(img), np.maximum(img, 0.0), 0.0)
+    lum = np.maximum(img @ LUMINANCE, 0.0)
+    corners = lum[:-1] + lum[1:]                             # rows i and i + 1
+    cells = 0.25 * (corners + np.roll(corners, -1, axis=1))  # columns j and j + 1 (wrapping)
+    theta = np.linspace(0.0, np.pi, h)
+    cells *= (np.cos(theta[:-1]) - np.cos(theta[1:]))[:, None]  # solid angle (up to 2 pi / W)
+    if not np.any(cells > 0):
+        cells = np.ones_like(cells) * (np.cos(theta[:-1]) - np.cos(theta[1:]))[:, None]
+    row_sums = cells.sum(axis=1)
+    marginal = np.concatenate([[0.0], np.cumsum(row_sums)]) / row_sums.sum()
+    marginal[-1] = 1.0
+    safe = np.where(row_sums > 0, row_sums, 1.0)[:, None]
+    cond = np.concatenate([np.zeros((h - 1, 1)), np.cumsum(cells, axis=1) / safe], axis=1)
+    cond[row_sums <= 0] = np.linspace(0.0, 1.0, w + 1)
+    cond[:, -1] = 1.0
+    table = np.concatenate([img.reshape(-1), marginal, cond.reshape(-1)])
+    return np.ascontiguousarray(table, np.float32), (w, h)

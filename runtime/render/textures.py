@@ -1,0 +1,141 @@
+"""A scene's textures for the kernels: instances for the ``specialize`` pass and one texel
+buffer.
+
+A texture that sets a BSDF parameter becomes a :class:`TextureRef` in that BSDF's instance;
+the texture itself is an :class:`Instance` of the stdlib plugin (``stdlib/texture/``).  The
+texels of every bitmap are concatenated into ``T`` (3 float32 per texel, linear RGB, rows
+top to bottom), each bitmap's offset, width and height being constants of its instance.
+Lookups, filtering and wrapping happen in rdsl (``stdlib/texture/bitmap.rdsl``); Python only
+decodes the images, as Mitsuba does when it loads them: 8-bit (and 16-bit) PNG and JPEG
+images are sRGB-encoded and are linearized unless ``raw`` is set, EXR images are linear.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ...compiler.diagnostics import CompileError
+from ...compiler.passes.specialize import Instance, TextureRef
+
+# Mitsuba plugin -> rdsl file under stdlib/
+TEXTURE_PLUGINS = {"bitmap": "texture.bitmap", "checkerboard": "texture.checkerboard"}
+# numbering of stdlib/texture/bitmap.rdsl (filter_bilinear() ... wrap_clamp())
+BITMAP_FILTERS = {"bilinear": 0, "nearest": 1}
+BITMAP_WRAPS = {"repeat": 0, "mirror": 1, "clamp": 2}
+
+
+def srgb_to_linear(x: np.ndarray) -> np.ndarray:
+    """The inverse of the sRGB transfer function, for values in [0, 1]."""
+    x = np.asarray(x, np.float64)
+    return np.where(x <= 0.04045, x / 12.92, np.power((x + 0.055) / 1.055, 2.4))
+
+
+def _pillow() -> Any:
+    try:
+        from PIL import Image
+    except ImportError:
+        raise RuntimeError("reading PNG and JPEG textures needs Pillow "
+                           "(pip install 'pillow>=10,<14')") from None
+    return Image
+
+
+def load_bitmap(path: str | Path, raw: bool = False) -> np.ndarray:
+    """An image file as linear RGB float32 of shape (H, W, 3), row 0 at the top.  Grey
+    images are broadcast to RGB and alpha is dropped."""
+    path = Path(path)
+    if path.suffix.lower() == ".exr":
+        from .image import read_exr
+
+        a = read_exr(path)
+    else:
+        Image = _pillow()
+        with Image.open(path) as im:
+            if im.mode in ("I;16", "I;16B", "I;16L", "I"):
+                a = np.asarray(im, np.float64) / 65535.0
+            elif im.mode == "F":  # float samples are linear already
+                a, raw = np.asarray(im, np.float64), True
+            elif im.mode in ("1", "L", "LA", "La"):
+                a = np.asarray(im.convert("L"), np.float64) / 255.0
+            else:
+                a = np.asarray(im.convert("RGB"), np.float64) / 255.0
+        if not raw:
+            a = srgb_to_linear(a)
+    a = np.asarray(a, np.float32)
+    if a.ndim == 2:
+        a = a[:, :, None]
+    a = a[:, :, :3] if a.shape[2] >= 3 else np.repeat(a[:, :, :1], 3, axis=2)
+    return np.ascontiguousarray(a, np.float32)
+
+
+def _uv_rows(m: Any) -> dict[str, tuple[float, ...]]:
+    """``to_uv`` (4x4) as the rows of its 2-D affine part (Mitsuba's ``extract()``)."""
+    m = np.asarray(m, np.float64)
+    return {"to_u": (m[0, 0], m[0, 1], m[0, 3]), "to_v": (m[1, 0], m[1, 1], m[1, 3])}
+
+
+class TextureTable:
+    """The scene's texture instances and the texel buffer ``T``, filled as BSDFs name
+    their textures (one instance per texture object, one copy of each image file)."""
+
+    def __init__(self) -> None:
+        self.instances: list[Instance] = []
+        self._ids: dict[int, tuple[Any, int]] = {}  # id(plugin) -> (plugin, index)
+        self._images: dict[tuple[str, bool], tuple[int, int, int, np.ndarray]] = {}
+        self._texels: list[np.ndarray] = []
+        self._count = 0
+
+    def ref(self, plugin: Any, what: str) -> TextureRef:
+        """The reference for texture ``plugin`` (``what``: the parameter it sets)."""
+        key = id(plugin)
+        if key not in self._ids:
+            self._ids[key] = (plugin, len(self.instances))
+            self.instances.append(self._instance(plugin, what))
+        return TextureRef(self._ids[key][1])
+
+    def buffer(self) -> np.ndarray:
+        """``T``: every bitmap's texels (never empty, so the kernels get a valid pointer)."""
+        if not self._texels:
+            return np.zeros(3, np.float32)
+        return np.ascontiguousarray(np.concatenate(self._texels), np.float32)
+
+    def _instance(self, plugin: Any, what: str) -> Instance:
+        p = plugin.params
+        name = plugin.id or plugin.type
+        if plugin.type not in TEXTURE_PLUGINS:
+            raise CompileError(f"{what}: texture `{plugin.type}` is not supported by the "
+                               f"renderer yet (supported: {', '.join(TEXTURE_PLUGINS)})",
+                               plugin.loc)
+        params: dict[str, Any] = _uv_rows(p["to_uv"])
+        if plugin.type == "checkerboard":
+            for c in ("color0", "color1"):
+                rgb = getattr(p[c], "rgb", None)
+                if rgb is None:
+                    raise CompileError(f"checkerboard.{c}: textures of textures are not "
+                                       "supported by the renderer yet", plugin.loc)
+                params[c] = tuple(float(x) for x in rgb)
+        else:
+            offset, w, h, mean = self._image(p["filename"], bool(p["raw"]), plugin)
+            params.update(offset=offset, width=w, height=h, average=mean,
+                          filter=BITMAP_FILTERS[p["filter_type"]],
+                          wrap=BITMAP_WRAPS[p["wrap_mode"]])
+        return Instance(plugin.type, params, name)
+
+    def _image(self, filename: str, raw: bool, plugin: Any
+               ) -> tuple[int, int, int, tuple[float, ...]]:
+        key = (str(Path(filename).resolve()), raw)
+        if key not in self._images:
+            try:
+                img = load_bitmap(filename, raw)
+            except (OSError, ValueError, SyntaxError) as e:
+                raise CompileError(f"bitmap: cannot load '{filename}': {e}",
+                                   plugin.loc) from None
+            h, w = img.shape[:2]
+            mean = tuple(float(x) for x in img.reshape(-1, 3).mean(axis=0))
+            self._images[key] = (self._count, w, h, mean)
+            self._texels.append(img.reshape(-1))
+            self._count += w * h
+        offset, w, h, mean = self._images[key]
+        return offset, w, h, mean
