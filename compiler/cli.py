@@ -55,6 +55,8 @@ def _parser() -> argparse.ArgumentParser:
                    help="set a scene parameter declared with <default>")
     r.add_argument("--report", action="store_true",
                    help="print what specialization did and the kernel sizes")
+    r.add_argument("--no-specialize", dest="specialize", action="store_false",
+                   help="the generic build: parameters read at run time, every emitter kind")
     r.add_argument("--quiet", action="store_true", help="no progress bar")
     return p
 

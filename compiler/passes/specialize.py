@@ -22,12 +22,21 @@ a :class:`TextureRef` becomes ``scene_texture_eval(k, ...)``, called with the pl
 arguments of the same names (``si``, ``T``), whose own dispatch covers the scene's textures;
 since a texture param ``reflectance(si)`` evaluates to the param value, evaluating the
 texture at the same ``si`` first is the same thing.
+
+The generic build (``Specialize(scene, fold=False)``, ``rdsl render --no-specialize``) keeps
+the same dispatch over plugin types but reads every parameter the scene sets from a float
+buffer ``PRM`` at run time (a :class:`Slot` per value, laid out by :func:`parameter_slots`);
+the placeholders, and every function that reaches one, get ``PRM`` as a last argument, the
+kernels included.  Its code depends on the scene's plugin types, instances and which
+parameters they set, never on the values, so scenes differing only in values share it.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
 from typing import Any
+
+import numpy as np
 
 from ..diagnostics import CompileError
 from ..ir import (
@@ -63,6 +72,8 @@ PLACEHOLDERS = {
     "scene_bsdf_leaf_sample": ("bsdf_leaves", "sample"),
 }
 TEXTURE_PLACEHOLDER = "scene_texture_eval"
+EMITTER_KIND_PLACEHOLDER = "scene_has_emitter_kind"  # folded to the scene's emitter kinds
+PARAM_BUFFER = "PRM"  # the generic build's parameter buffer
 
 
 @dataclass(frozen=True)
@@ -70,6 +81,15 @@ class TextureRef:
     """A parameter value that is the scene's texture ``index`` (in ``SceneSpec.textures``)."""
 
     index: int
+
+
+@dataclass(frozen=True)
+class Slot:
+    """A parameter value read at run time from ``PRM[offset:offset + size]`` (the generic
+    build).  Ints and bools are stored as floats (exact below 2**24) and converted back."""
+
+    offset: int
+    size: int
 
 
 @dataclass
@@ -94,6 +114,39 @@ class SceneSpec:
     emitters: list[Instance] = field(default_factory=list)
     textures: list[Instance] = field(default_factory=list)
     bsdf_leaves: list[Instance] = field(default_factory=list)  # nested in combinators
+    # the kinds of emitter the scene has (lights.rdsl's EK kinds); None: any kind may occur
+    emitter_kinds: tuple[int, ...] | None = None
+
+
+def parameter_slots(scene: SceneSpec) -> tuple[SceneSpec, np.ndarray]:
+    """The generic build's scene: every parameter value the scene sets (textures aside)
+    becomes a :class:`Slot` into the returned float32 buffer ``PRM``, which holds the values,
+    instance after instance (colors and vectors as their components; empty if the scene sets
+    no parameter, and then the kernels take no ``PRM``)."""
+    values: list[float] = []
+
+    def slot(value: Any, what: str) -> Any:
+        if isinstance(value, (TextureRef, Slot)):
+            return value
+        xs = list(value) if isinstance(value, (tuple, list, np.ndarray)) else [value]
+        for x in xs:
+            if isinstance(x, (int, np.integer)) and not isinstance(x, bool) and \
+                    abs(int(x)) >= 1 << 24:
+                raise CompileError(f"{what}: {x} is too large for the generic build's "
+                                   "parameter buffer (floats, exact below 2**24)")
+        out = Slot(len(values), len(xs))
+        values.extend(float(x) for x in xs)
+        return out
+
+    def instances(kind: str) -> list[Instance]:
+        return [Instance(i.plugin, {k: slot(v, f"{i.name or i.plugin}.{k}")
+                                    for k, v in i.params.items()}, i.name, list(i.children))
+                for i in getattr(scene, kind)]
+
+    # emitter_kinds stays None: the generic build samples every kind of emitter
+    spec = SceneSpec(instances("bsdfs"), instances("emitters"), instances("textures"),
+                     instances("bsdf_leaves"))
+    return spec, np.asarray(values, np.float32)
 
 
 def describe(scene: SceneSpec, placeholders: list[str] | None = None) -> list[str]:
@@ -111,9 +164,13 @@ def describe(scene: SceneSpec, placeholders: list[str] | None = None) -> list[st
 class Specialize(Pass):
     name = "specialize"
 
-    def __init__(self, scene: SceneSpec | None = None, report: list[str] | None = None) -> None:
+    def __init__(self, scene: SceneSpec | None = None, report: list[str] | None = None,
+                 fold: bool = True) -> None:
         self.scene = scene or SceneSpec()
+        if not fold:
+            self.scene, _ = parameter_slots(self.scene)
         self.report = report if report is not None else []
+        self._prm: dict[str, Value] = {}  # placeholder -> its PRM argument, once it reads one
 
     def run(self, module: Module) -> None:
         for stub_name, (kind, method) in PLACEHOLDERS.items():
@@ -121,6 +178,13 @@ class Specialize(Pass):
             if stub is None:
                 continue
             self._dispatch(module, stub, getattr(self.scene, kind), method)
+        kinds = module.functions.get(EMITTER_KIND_PLACEHOLDER)
+        if kinds is not None and self.scene.emitter_kinds is not None:
+            kinds.body = _kind_test(kinds, self.scene.emitter_kinds)
+        if self._prm:
+            for name, prm in self._prm.items():
+                module.functions[name].params.append(Param(prm, uniform=True))
+            _thread_buffer(module, PARAM_BUFFER)
         self.report.extend(describe(self.scene, [n for n in PLACEHOLDERS
                                                  if n in module.functions]))
 
@@ -190,6 +254,10 @@ class Specialize(Pass):
         what = f"{group[0].plugin}.{name}"
 
         def value_of(value: Any) -> Value:
+            if isinstance(value, Slot):
+                if stub.name not in self._prm:
+                    self._prm[stub.name] = Value(BufferType(F32), PARAM_BUFFER)
+                return _load(b, p.value.type, value, self._prm[stub.name], what)
             if not isinstance(value, TextureRef):
                 return _constant(b, p.value.type, value, what)
             if value.index not in textures:
@@ -222,6 +290,8 @@ class Specialize(Pass):
         ours = {p.value.name: p.value for p in stub.params}
         operands = [b.const(index, I32)]
         for p in tex.params[1:]:
+            if p.value.name == PARAM_BUFFER:
+                continue  # threaded by _thread_buffer
             v = ours.get(p.value.name)
             if v is None or v.type != p.value.type:
                 raise CompileError(f"{what}: a texture needs the argument `{p.value.name}: "
@@ -252,3 +322,53 @@ def _constant(b: Builder, t: Type, value: Any, what: str) -> Value:
             raise CompileError(f"{what}: expected {t.n} values, got {len(vals)}")
         return b.op(Op.MAKE, t, *[b.const(float(v), F32) for v in vals])
     raise CompileError(f"{what}: parameters of type `{t}` cannot be set from a scene yet")
+
+
+def _kind_test(fn: Function, kinds: tuple[int, ...]) -> Block:
+    """``return kind == k0 || kind == k1 ...`` (false when ``kinds`` is empty)."""
+    body = Block()
+    b = Builder(body, fn.loc)
+    kind = fn.params[0].value
+    out = b.const(False, BOOL)
+    for k in sorted(set(kinds)):
+        out = b.op(Op.OR, BOOL, out, b.op(Op.EQ, BOOL, kind, b.const(int(k), I32)))
+    b.emit(Op.RETURN, [out], [])
+    return body
+
+
+def _load(b: Builder, t: Type, slot: Slot, prm: Value, what: str) -> Value:
+    """Read a parameter of type ``t`` from ``prm`` at ``slot`` (before lifting)."""
+    xs = [b.op(Op.LOAD, F32, prm, b.const(slot.offset + k, I32)) for k in range(slot.size)]
+    if isinstance(t, ScalarType) and slot.size == 1:
+        if t.name == "f32":
+            return xs[0]
+        if t.name == "bool":
+            return b.op(Op.NE, BOOL, xs[0], b.const(0.0, F32))
+        return b.op(Op.CAST, t, xs[0])
+    if isinstance(t, SpectrumType) and slot.size in (1, 3):
+        return b.op(Op.BROADCAST, t, xs[0]) if slot.size == 1 else b.op(Op.SPEC_RGB, t, *xs)
+    if isinstance(t, VecType) and slot.size in (1, t.n):
+        return b.op(Op.MAKE, t, *(xs * t.n if slot.size == 1 else xs))
+    raise CompileError(f"{what}: {slot.size} value(s) cannot set a parameter of type `{t}`")
+
+
+def _thread_buffer(module: Module, name: str) -> None:
+    """Pass the buffer argument ``name`` down every call chain that reaches a function taking
+    it as its last parameter: callers get it as their own last parameter, to a fixpoint."""
+    changed = True
+    while changed:
+        changed = False
+        for fn in module.functions.values():
+            for ins in fn.walk():
+                if ins.op is not Op.CALL:
+                    continue
+                callee = module.functions.get(ins.attrs["callee"])
+                if (callee is None or not callee.params or callee.params[-1].value.name != name
+                        or len(ins.operands) == len(callee.params)):
+                    continue
+                own = fn.params[-1].value if fn.params else None
+                if own is None or own.name != name or not isinstance(own.type, BufferType):
+                    own = Value(BufferType(F32), name)
+                    fn.params.append(Param(own, uniform=True))
+                ins.operands.append(own)
+                changed = True

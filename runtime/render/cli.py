@@ -30,7 +30,8 @@ def render_command(args: Any) -> int:
     defines = parse_defines(args.defines)
 
     t0 = time.perf_counter()
-    scene = load_scene(scene_path, variant=args.variant, target=args.target, **defines)
+    scene = load_scene(scene_path, variant=args.variant, target=args.target,
+                       specialize=getattr(args, "specialize", True), **defines)
     t_load = time.perf_counter() - t0
     if not scene.buffers.nlight:
         print(f"{scene_path}: warning: the scene has no emitters; the image will be black",
@@ -41,6 +42,9 @@ def render_command(args: Any) -> int:
     if args.report:
         for line in scene.report:
             print(f"specialize: {line}")
+        spec, generic = scene.instruction_counts()
+        print(f"render_sample: {spec} instructions specialized, {generic} generic "
+              f"({100 * (spec - generic) / generic:+.0f}%)")
         k = mod.manifest["kernels"]
         print(f"kernels: {', '.join(x['name'] for x in k)} for `{mod.target}` "
               f"(width {mod.width}, variant {mod.variant})")
@@ -54,8 +58,12 @@ def render_command(args: Any) -> int:
               "the image", file=sys.stderr)
     try:
         out.parent.mkdir(parents=True, exist_ok=True)
-        write_exr(out, img)
-        write_png(png, img)
+        # channels past the radiance are AOVs (an `aov` integrator), one EXR channel each
+        names = scene.channel_names
+        base = 1 if names[0] == "Y" else 3
+        write_exr(out, img[..., :base], extra={n: img[..., i]
+                                               for i, n in enumerate(names) if i >= base})
+        write_png(png, img[..., :base])
     except OSError as e:
         raise CompileError(f"{out}: error: cannot write the image: {e.strerror or e}") from None
     h, w = img.shape[:2]

@@ -1,0 +1,99 @@
+"""The scene's integrator, as the render kernel calls it: which stdlib function computes the
+radiance (``path_li`` in stdlib/render/path.rdsl, ``direct_li`` in direct.rdsl) and which AOV
+channels (stdlib/render/aov.rdsl) follow it on the film.
+
+Mitsuba 3's ``aov`` integrator writes the nested integrator's RGB as the image's base
+channels (0 without one) and then one channel group per ``name:type`` entry of ``aovs``,
+named as aov.cpp names them (``dd.y:depth`` -> ``dd.y.T``, ``nn:sh_normal`` ->
+``nn.X``, ``nn.Y``, ``nn.Z``).  This module only parses and names; the per-sample values
+are computed in rdsl.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+from ...compiler.diagnostics import CompileError
+
+__all__ = ["AOV_TYPES", "INTEGRATORS", "IntegratorPlan", "integrator_plan"]
+
+INTEGRATORS = ("path", "direct", "aov")
+RADIANCE = ("path", "direct")
+# AOV type -> (channel suffixes, rdsl expression of the `Aov` struct `aov`, per channel)
+AOV_TYPES: dict[str, tuple[tuple[str, ...], tuple[str, ...]]] = {
+    "depth": (("T",), ("aov.depth",)),
+    "position": (("X", "Y", "Z"), ("aov.position.x", "aov.position.y", "aov.position.z")),
+    "geo_normal": (("X", "Y", "Z"),
+                   ("aov.geo_normal.x", "aov.geo_normal.y", "aov.geo_normal.z")),
+    "sh_normal": (("X", "Y", "Z"), ("aov.sh_normal.x", "aov.sh_normal.y", "aov.sh_normal.z")),
+    "uv": (("U", "V"), ("aov.uv.x", "aov.uv.y")),
+    "albedo": (("R", "G", "B"), ()),  # a Spectrum: expanded by the kernel writer
+}
+
+
+@dataclass
+class IntegratorPlan:
+    """What the render kernel computes per sample: the radiance integrator (None: black) and
+    the AOVs as (name, type) pairs."""
+
+    radiance: Any | None
+    aovs: list[tuple[str, str]] = field(default_factory=list)
+
+    def aov_channel_names(self) -> list[str]:
+        """The AOV channels' EXR names, in film order."""
+        return [f"{name}.{s}" for name, kind in self.aovs for s in AOV_TYPES[kind][0]]
+
+
+def _check_radiance(integ: Any) -> None:
+    if integ.type == "aov":
+        raise CompileError("aov: an `aov` integrator cannot be nested in another", integ.loc)
+    if integ.type not in RADIANCE:
+        raise CompileError(f"integrator `{integ.type}` is not supported by the renderer yet "
+                           f"(supported: {', '.join(INTEGRATORS)})", integ.loc)
+    if integ.type == "direct":
+        p = integ.params
+        if p.get("shading_samples") is not None and (p.get("emitter_samples") is not None
+                                                     or p.get("bsdf_samples") is not None):
+            raise CompileError("direct: cannot specify both 'shading_samples' and "
+                               "('emitter_samples' and/or 'bsdf_samples')", integ.loc)
+        es, bs = direct_samples(integ)
+        if es < 0 or bs < 0 or es + bs == 0:
+            raise CompileError("direct: must have at least 1 BSDF or emitter sample "
+                               "(and no negative counts)", integ.loc)
+
+
+def direct_samples(integ: Any) -> tuple[int, int]:
+    """``direct``'s (emitter_samples, bsdf_samples), defaulting to ``shading_samples`` (1)."""
+    p = integ.params
+    shading = p.get("shading_samples")
+    shading = 1 if shading is None else int(shading)
+    es, bs = p.get("emitter_samples"), p.get("bsdf_samples")
+    return (shading if es is None else int(es)), (shading if bs is None else int(bs))
+
+
+def integrator_plan(integ: Any) -> IntegratorPlan:
+    """Parse the scene's integrator; unsupported ones raise a CompileError at their XML."""
+    if integ.type != "aov":
+        _check_radiance(integ)
+        return IntegratorPlan(integ)
+    nested = list(integ.children)
+    if len(nested) > 1:
+        raise CompileError("aov: the renderer supports at most one nested integrator "
+                           f"(got {len(nested)})", integ.loc)
+    for child in nested:
+        _check_radiance(child)
+    aovs: list[tuple[str, str]] = []
+    for token in str(integ.params["aovs"]).split(","):
+        token = token.strip()
+        if not token:
+            continue
+        item = token.split(":")
+        if len(item) != 2 or not item[0] or not item[1]:
+            raise CompileError(f"aov: invalid AOV specification `{token}`: require "
+                               "<name>:<type>", integ.loc)
+        if item[1] not in AOV_TYPES:
+            raise CompileError(f"aov: AOV type `{item[1]}` is not supported by the renderer "
+                               f"(supported: {', '.join(AOV_TYPES)})", integ.loc)
+        aovs.append((item[0], item[1]))
+    return IntegratorPlan(nested[0] if nested else None, aovs)

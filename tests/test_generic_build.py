@@ -1,0 +1,146 @@
+"""The generic build (``--no-specialize``): instance parameters read at run time from ``PRM``,
+every emitter kind compiled.  It renders the same image as the specialized build, one
+generic kernel serves scenes that differ only in parameter values, and ``--report`` compares
+the two kernels' sizes."""
+
+from __future__ import annotations
+
+import re
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+pytest.importorskip("rdsl.runtime.embree")
+
+from rdsl.compiler.cli import main
+from rdsl.runtime.render.renderer import load_scene
+from test_scene_bsdfs import BSDFS, OBLIQUE, scene_xml
+
+CBOX = Path(__file__).resolve().parents[2] / "shared" / "scenes" / "cbox" / "cbox.xml"
+needs_cbox = pytest.mark.skipif(not CBOX.is_file(), reason=f"needs {CBOX}")
+
+
+def same_image(path: Path, spp: int = 4, seed: int = 3, **defaults) -> str:
+    """Render ``path`` specialized and generic; assert the images agree, say how."""
+    a = load_scene(path, **defaults)
+    b = load_scene(path, specialize=False, **defaults)
+    ia, ib = a.render(spp=spp, seed=seed), b.render(spp=spp, seed=seed)
+    assert b.params.size > 0  # the generic kernel did read its parameters at run time
+    assert ia.shape == ib.shape and a.nonfinite == b.nonfinite
+    if np.array_equal(ia, ib):
+        return "bit for bit"
+    diff = float(np.abs(ia - ib).max())
+    assert diff < 1e-5, diff
+    return f"max abs diff {diff:.2g}"
+
+
+@needs_cbox
+def test_cbox_generic_equals_specialized():
+    how = same_image(CBOX, res=64)
+    print(f"cbox: {how}")
+
+
+def test_bsdfs_textures_and_emitter_kinds(tmp_path):
+    """Every BSDF type, nested combinators, a checkerboard and a bitmap texture, an area, a
+    point and a constant emitter."""
+    from PIL import Image
+
+    rng = np.random.default_rng(9)
+    Image.fromarray(rng.integers(40, 255, (3, 4, 3)).astype(np.uint8), "RGB").save(
+        tmp_path / "tex.png")
+    spheres = "".join(
+        f'<shape type="sphere"><point name="center" value="{2.2 * (i % 5) - 4.4}, '
+        f'{2.2 * (i // 5) - 2.2}, 1"/><float name="radius" value="0.9"/>{b}</shape>'
+        for i, b in enumerate(BSDFS))
+    body = ('<shape type="rectangle"><transform name="to_world"><scale value="4"/>'
+            '<translate z="8"/></transform><boolean name="flip_normals" value="true"/>'
+            '<emitter type="area"><rgb name="radiance" value="3, 2, 1"/></emitter></shape>'
+            '<shape type="rectangle"><transform name="to_world"><scale value="12"/>'
+            '</transform><bsdf type="diffuse"><texture type="checkerboard" '
+            'name="reflectance"><rgb name="color0" value="0.8, 0.5, 0.2"/>'
+            '<transform name="to_uv"><scale x="6" y="6"/></transform></texture></bsdf>'
+            '</shape>'
+            '<shape type="sphere"><point name="center" value="4.4, 4.4, 1"/>'
+            '<float name="radius" value="0.9"/><bsdf type="roughplastic">'
+            '<texture type="bitmap" name="diffuse_reflectance">'
+            '<string name="filename" value="tex.png"/></texture></bsdf></shape>'
+            '<emitter type="point"><point name="position" value="0, 0, 5"/>'
+            '<rgb name="intensity" value="10, 10, 10"/></emitter>'
+            '<emitter type="constant"><rgb name="radiance" value="0.2, 0.3, 0.4"/></emitter>'
+            + spheres)
+    path = tmp_path / "all.xml"
+    path.write_text(scene_xml(body, OBLIQUE, res=32))
+    how = same_image(path, spp=4)
+    print(f"bsdfs + textures: {how}")
+
+
+COLORED = """<scene version="3.0.0">
+    <default name="color" value="0.5, 0.5, 0.5"/>
+    <sensor type="perspective"><float name="fov" value="40"/>
+        <transform name="to_world"><lookat origin="0, -6, 3" target="0, 0, 0" up="0, 0, 1"/>
+        </transform>
+        <film type="hdrfilm"><integer name="width" value="16"/>
+            <integer name="height" value="16"/></film>
+    </sensor>
+    <shape type="rectangle"><transform name="to_world"><scale value="3"/></transform>
+        <bsdf type="diffuse"><rgb name="reflectance" value="$color"/></bsdf></shape>
+    <shape type="rectangle"><transform name="to_world"><translate z="4"/></transform>
+        <boolean name="flip_normals" value="true"/>
+        <emitter type="area"><rgb name="radiance" value="5, 5, 5"/></emitter></shape>
+</scene>"""
+
+
+def test_generic_kernel_is_shared_across_parameter_values(tmp_path, monkeypatch):
+    monkeypatch.setenv("RDSL_CACHE_DIR", str(tmp_path / "cache"))
+    path = tmp_path / "colored.xml"
+    path.write_text(COLORED)
+    colors = ["0.8, 0.1, 0.1", "0.1, 0.2, 0.7"]  # as `-D color=...`
+    generic = [load_scene(path, specialize=False, color=c) for c in colors]
+    images = [s.render(spp=2, seed=1) for s in generic]
+    assert [s.from_cache for s in generic] == [False, True]  # one compile serves both
+    specialized = [load_scene(path, color=c) for c in colors]
+    for s, img in zip(specialized, images):
+        np.testing.assert_allclose(s.render(spp=2, seed=1), img, rtol=0, atol=1e-5)
+    assert [s.from_cache for s in specialized] == [False, False]  # values are constants
+    assert not np.allclose(images[0], images[1])  # the parameter did reach the kernel
+
+
+@needs_cbox
+def test_report_compares_instruction_counts(tmp_path, capsys):
+    out = tmp_path / "cbox.exr"
+    assert main(["render", str(CBOX), "-D", "res=16", "--spp", "1", "-o", str(out),
+                 "--report", "--quiet"]) == 0
+    text = capsys.readouterr().out
+    m = re.search(r"render_sample: (\d+) instructions specialized, (\d+) generic", text)
+    assert m, text
+    spec, generic = int(m[1]), int(m[2])
+    assert spec < generic, text
+    assert "parameters: 12 values of 4 instance(s) folded as constants" in text
+    assert "sampling code for point, spot, directional, constant, envmap folded away" in text
+    print(m[0])
+
+
+def test_fold_false_reads_parameters_from_prm():
+    """``Specialize(scene, fold=False)``: same dispatch, parameters loaded from ``PRM``
+    (threaded to the caller as its last argument); same results as the folded build."""
+    import rdsl
+    from rdsl.compiler.driver import frontend, run_passes
+    from rdsl.compiler.ir import Op
+    from rdsl.compiler.passes.specialize import Specialize, parameter_slots
+    from test_specialize import SCENE, SRC, surface
+
+    m = frontend(SRC)
+    run_passes(m, [Specialize(SCENE, fold=False)])
+    assert m.functions["shade"].params[-1].value.name == "PRM"
+    loads = [i for i in m.functions["scene_bsdf_eval"].walk() if i.op is Op.LOAD]
+    assert len(loads) == 7  # two rgb reflectances and one alpha
+    generic, prm = parameter_slots(SCENE)
+    np.testing.assert_array_equal(prm, np.float32([0.8, 0.1, 0.1, 0.3, 0.1, 0.7, 0.2]))
+    a = rdsl.jit(SRC, target="host", scene=SCENE)
+    b = rdsl.jit(SRC, target="host", scene=generic)
+    rng = np.random.default_rng(5)
+    si, wo = surface(200, rng), surface(200, rng)["wi"]
+    ids = rng.integers(0, 3, 200).astype(np.int32)
+    t = np.zeros(3, np.float32)
+    np.testing.assert_array_equal(a.shade(ids, si, wo, t), b.shade(ids, si, wo, t, prm))
