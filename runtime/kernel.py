@@ -38,6 +38,19 @@ def _shape_desc(tj: dict[str, Any]) -> str:
     return "(N,)"
 
 
+_POOLS: dict[int, ThreadPoolExecutor] = {}
+
+
+def _pool(threads: int) -> ThreadPoolExecutor:
+    """A long-lived pool per thread count: starting threads for every call costs more than
+    a small kernel call itself."""
+    pool = _POOLS.get(threads)
+    if pool is None:
+        pool = _POOLS[threads] = ThreadPoolExecutor(max_workers=threads,
+                                                    thread_name_prefix="rdsl")
+    return pool
+
+
 class Kernel:
     """One compiled kernel.  Call it with arrays (see ``__call__``); ``signature`` shows how."""
 
@@ -287,8 +300,16 @@ class Kernel:
         outs = [(i, a) for i, a in enumerate(self.args) if a["kind"] == "output"]
         alloc = np.zeros if mask is not None else np.empty
         out_arrays = {}
+        # outputs of one dtype are the rows of one block, in result order: a vector result
+        # is then a view (no copy), and consecutive leaves are one contiguous array
+        blocks = {}
+        for dt in dict.fromkeys(a["dtype"] for _, a in outs):
+            count = sum(1 for _, a in outs if a["dtype"] == dt)
+            blocks[dt] = [alloc((count, n), dtype=_C_DTYPES[dt]), 0]
         for i, a in outs:
-            arr = alloc(n, dtype=_C_DTYPES[a["dtype"]])
+            blk = blocks[a["dtype"]]
+            arr = blk[0][blk[1]]
+            blk[1] += 1
             out_arrays[a["name"]] = arr
             c_vals[i] = arr.ctypes.data
         for i, a in enumerate(self.args):
@@ -311,10 +332,10 @@ class Kernel:
         chunk = max(MIN_CHUNK, math.ceil(n / (threads * CHUNKS_PER_THREAD)))
         chunk = (chunk + W - 1) // W * W
         bounds = [(b, min(b + chunk, n)) for b in range(0, n, chunk)]
-        with ThreadPoolExecutor(max_workers=min(threads, len(bounds))) as pool:
-            futures = [pool.submit(self._range, b, e, *c_vals, mask_ptr) for b, e in bounds]
-            for f in futures:
-                f.result()
+        pool = _pool(threads)
+        futures = [pool.submit(self._range, b, e, *c_vals, mask_ptr) for b, e in bounds]
+        for f in futures:
+            f.result()
 
     def _results(self, out_arrays: dict[str, np.ndarray], n: int) -> Any:
         tj = self.result.get("type")
@@ -333,7 +354,7 @@ class Kernel:
             if kind in ("vec", "mat"):
                 k = t["n"] if kind == "vec" else t["n"] * t["n"]
                 cols = [take(t["dtype"]) for _ in range(k)]
-                out = np.stack(cols, axis=1)
+                out = _columns(cols, n)
                 return out.reshape(n, t["n"], t["n"]) if kind == "mat" else out
             if kind == "struct":
                 return {f: build(ft) for f, ft in t["fields"]}
@@ -342,6 +363,20 @@ class Kernel:
             raise TypeError(t)
 
         return build(tj)
+
+
+def _columns(cols: list[np.ndarray], n: int) -> np.ndarray:
+    """``cols`` as the columns of an (n, k) array: a transposed view when they are
+    consecutive rows of one block (as the kernel call allocates them), else a copy."""
+    first = cols[0]
+    step = first.itemsize * n
+    base = first.base
+    if base is not None and all(c.base is base and
+                                c.ctypes.data == first.ctypes.data + j * step
+                                for j, c in enumerate(cols)):
+        row0 = (first.ctypes.data - base.ctypes.data) // step
+        return base[row0:row0 + len(cols)].T
+    return np.stack(cols, axis=1)
 
 
 def _c_scalar(v: Any, dtype: str) -> Any:

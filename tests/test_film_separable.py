@@ -37,8 +37,8 @@ fn weights(x: Float, y: Float, gx: Int, gy: Int, spp: Int) -> W {{
 fn direct(pixel: Int, spp: Int, pos: [Float], values: [Float], acc: [Float]) -> Int {{
     var film = {lit}; film.spp = spp; return film_accumulate(pixel, film, pos, values, acc);
 }}
-fn separable(pixel: Int, spp: Int, wts: [Float], values: [Float], acc: [Float]) {{
-    var film = {lit}; film.spp = spp; film_accumulate_separable(pixel, film, wts, values, acc);
+fn separable(pixel: Int, spp: Int, S: [Float], ns: Int, acc: [Float]) {{
+    var film = {lit}; film.spp = spp; film_accumulate_separable(pixel, film, S, ns, acc);
 }}
 """
 
@@ -56,11 +56,13 @@ def test_separable_equals_direct(kind, param):
     y = (gy + rng.random(cell.size)).astype(np.float32)
     vals = rng.random((cell.size, 3)).astype(np.float32).reshape(-1)
     w = mod.weights(x, y, gx.astype(np.int32), gy.astype(np.int32), spp)
-    wts = np.ascontiguousarray(np.stack([w[f"w{k}"] for k in range(len(w))], 1).reshape(-1))
+    # structure of arrays: the 3 channels, then the weights, one row per quantity
+    S = np.ascontiguousarray(np.concatenate([vals.reshape(-1, 3).T,
+                                             np.stack([w[f"w{k}"] for k in range(len(w))])]))
     pixels = np.arange(film["crop_w"] * film["crop_h"], dtype=np.int32)
     a = new_accumulator(film)
     mod.direct(pixels, spp, np.ascontiguousarray(np.stack([x, y], 1).reshape(-1)), vals, a)
     b = new_accumulator(film)
-    mod.separable(pixels, spp, wts, vals, b)
+    mod.separable(pixels, spp, S.reshape(-1), cell.size, b)
     np.testing.assert_allclose(b, a, rtol=2e-6, atol=1e-7)
     assert np.all(a[3::4] > 0)  # every pixel got weight

@@ -237,10 +237,10 @@ def kernel_source(desc: Any, bufs: SceneBuffers, bsdfs: list[Instance],
         "}",
         "",
         "// the film's layout is a constant of the scene, so its loops and filter fold",
-        "fn film_pass(pixel: Int, spp: Int, wts: [Float], values: [Float], acc: [Float]) {",
+        "fn film_pass(pixel: Int, spp: Int, S: [Float], ns: Int, acc: [Float]) {",
         f"    var film = {_literal(dict(film, spp=0), 'Film')};",
         "    film.spp = spp;",
-        "    film_accumulate_separable(pixel, film, wts, values, acc);",
+        "    film_accumulate_separable(pixel, film, S, ns, acc);",
         "}",
         "",
     ]
@@ -364,20 +364,29 @@ class Scene:
             s = np.tile(np.arange(done, done + n, dtype=np.int32), cells)
             out = mod["render_sample"](cell, s, spp, np.uint32(seed), *self.buffers.args(),
                                        *self._param_args(mod), threads=threads)
-            m2 = sum(1 for k in out if k.startswith("w"))
-            wts = np.ascontiguousarray(np.stack([out[f"w{k}"] for k in range(m2)], axis=1)
-                                       .reshape(-1))
-            # the film's channels: the radiance, then each AOV field's components
-            vals = np.concatenate([np.asarray(out[k], np.float32).reshape(len(cell), -1)
-                                   for k in ["value", *(f"aov{j}" for j in range(len(out)))]
-                                   if k in out], axis=1)
-            vals = np.ascontiguousarray(vals.reshape(-1))
-            mod["film_pass"](pixels, n, wts, vals, acc, threads=threads)
+            S = _film_samples(out, len(cell))
+            mod["film_pass"](pixels, n, S, len(cell), acc, threads=threads)
             self.nonfinite += int(np.count_nonzero(out["bad"]))
             done += n
             bar.update(done)
         bar.finish()
         return develop(acc, dict(film, spp=spp))
+
+
+def _film_samples(out: dict[str, Any], ns: int) -> np.ndarray:
+    """The film's structure-of-arrays sample buffer: the radiance and AOV channels, then the
+    filter weights, one row of ``ns`` floats each.  The kernel call allocates its float
+    outputs as consecutive rows of one block in exactly this order, so this is normally
+    that block itself (no copy)."""
+    names = ["value", *sorted((k for k in out if k.startswith("aov")), key=lambda k: int(k[3:])),
+             *sorted((k for k in out if k.startswith("w")), key=lambda k: int(k[1:]))]
+    rows = [r for k in names for r in np.asarray(out[k]).reshape(ns, -1).T]
+    block = rows[0].base
+    if block is not None and block.ndim == 2 and block.shape == (len(rows), ns) and \
+            block.flags.c_contiguous and all(
+                r.ctypes.data == block.ctypes.data + j * ns * 4 for j, r in enumerate(rows)):
+        return block.reshape(-1)
+    return np.ascontiguousarray(np.stack(rows)).reshape(-1)
 
 
 def load_scene(path: str | Path, variant: str = "rgb", target: str = "host",
