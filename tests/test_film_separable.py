@@ -5,9 +5,8 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-
 import rdsl
-from rdsl.runtime.render.film import new_accumulator
+from rdsl.runtime.render.film import film_reach, new_accumulator
 from rdsl.runtime.render.renderer import _literal
 
 FILTERS = [(0, 0.5), (1, 1.0), (1, 1.6), (2, 0.5)]  # (kind, param): box, tent, gaussian
@@ -21,8 +20,7 @@ def film_for(kind: int, param: float, spp: int) -> dict:
 
 def source(film: dict) -> str:
     lit = _literal(dict(film, spp=0), "Film")
-    m = 2 * (int(np.ceil(np.float32({0: 0.5, 1: film["filter_param"]}.get(
-        film["filter"], 4 * film["filter_param"])) + np.float32(0.5))) - 1) + 1
+    m = 2 * film_reach(film) + 1
     fields = ", ".join(f"w{k}: Float" for k in range(2 * m))
     ws = ", ".join([f"w{k}: film_axis_weight(film, x, gx - n + {k})" for k in range(m)]
                    + [f"w{m + k}: film_axis_weight(film, y, gy - n + {k})" for k in range(m)])

@@ -173,11 +173,11 @@ class Specialize(Pass):
         self._prm: dict[str, Value] = {}  # placeholder -> its PRM argument, once it reads one
 
     def run(self, module: Module) -> None:
-        for stub_name, (kind, method) in PLACEHOLDERS.items():
-            stub = module.functions.get(stub_name)
-            if stub is None:
+        for name, (kind, method) in PLACEHOLDERS.items():
+            placeholder = module.functions.get(name)
+            if placeholder is None:
                 continue
-            self._dispatch(module, stub, getattr(self.scene, kind), method)
+            self._dispatch(module, placeholder, getattr(self.scene, kind), method)
         kinds = module.functions.get(EMITTER_KIND_PLACEHOLDER)
         if kinds is not None and self.scene.emitter_kinds is not None:
             kinds.body = _kind_test(kinds, self.scene.emitter_kinds)
@@ -188,13 +188,13 @@ class Specialize(Pass):
         self.report.extend(describe(self.scene, [n for n in PLACEHOLDERS
                                                  if n in module.functions]))
 
-    def _dispatch(self, module: Module, stub: Function, instances: list[Instance],
+    def _dispatch(self, module: Module, placeholder: Function, instances: list[Instance],
                   method: str) -> None:
         """Dispatch over the plugin *types* of ``instances``; the parameters of one type's
         instances are selected by id, so three diffuse materials cost one diffuse call."""
         if not instances:
             return  # the placeholder's own body stays
-        ident, args = stub.params[0].value, [p.value for p in stub.params[1:]]
+        ident, args = placeholder.params[0].value, [p.value for p in placeholder.params[1:]]
         plain = [a for a in args if not isinstance(a.type, BufferType)]
         groups: dict[str, list[int]] = {}
         for k, inst in enumerate(instances):
@@ -211,10 +211,10 @@ class Specialize(Pass):
                                    "(is its file imported?)")
             defaults = {p.value.name: p.default for p in own.params} if own else {}
             then = Block()
-            tb = Builder(then, stub.loc)
+            tb = Builder(then, placeholder.loc)
             textures: dict[int, Value] = {}
             params = [self._param_value(tb, p, ident, [instances[k] for k in ids], ids,
-                                        defaults.get(p.value.name), module, stub, textures)
+                                        defaults.get(p.value.name), module, placeholder, textures)
                       for p in callee.params[len(lead):]]
             call = tb.emit(Op.CALL, lead + params, list(callee.ret_types),
                            {"callee": callee.name})
@@ -223,22 +223,22 @@ class Specialize(Pass):
                 tail = then  # the last type needs no test: ids come from the scene
                 continue
             block = Block()
-            bb = Builder(block, stub.loc)
+            bb = Builder(block, placeholder.loc)
             cond = None
             for k in ids:
                 c = bb.op(Op.EQ, BOOL, ident, bb.const(k, I32))
                 cond = c if cond is None else bb.op(Op.OR, BOOL, cond, c)
-            res = bb.emit(Op.IF, [cond], list(stub.ret_types), regions=[then, tail])
+            res = bb.emit(Op.IF, [cond], list(placeholder.ret_types), regions=[then, tail])
             bb.yield_(*res.results)
             tail = block
         assert tail is not None
         body.instrs = tail.instrs
         last = body.instrs.pop()
         body.instrs.append(Instr(Op.RETURN, last.operands, [], loc=last.loc))
-        stub.body = body
+        placeholder.body = body
 
     def _param_value(self, b: Builder, p: Param, ident: Value, group: list[Instance],
-                     ids: list[int], default: Any, module: Module, stub: Function,
+                     ids: list[int], default: Any, module: Module, placeholder: Function,
                      textures: dict[int, Value]) -> Value:
         """The parameter's constant (or texture call), or a select over the group's instances
         by id."""
@@ -255,13 +255,13 @@ class Specialize(Pass):
 
         def value_of(value: Any) -> Value:
             if isinstance(value, Slot):
-                if stub.name not in self._prm:
-                    self._prm[stub.name] = Value(BufferType(F32), PARAM_BUFFER)
-                return _load(b, p.value.type, value, self._prm[stub.name], what)
+                if placeholder.name not in self._prm:
+                    self._prm[placeholder.name] = Value(BufferType(F32), PARAM_BUFFER)
+                return _load(b, p.value.type, value, self._prm[placeholder.name], what)
             if not isinstance(value, TextureRef):
                 return _constant(b, p.value.type, value, what)
             if value.index not in textures:
-                textures[value.index] = self._texture(b, value.index, module, stub, what)
+                textures[value.index] = self._texture(b, value.index, module, placeholder, what)
             return textures[value.index]
 
         if not isinstance(p.value.type, SpectrumType) and any(
@@ -276,18 +276,18 @@ class Specialize(Pass):
             out = b.op(Op.SELECT, p.value.type, c, value_of(value), out)
         return out
 
-    def _texture(self, b: Builder, index: int, module: Module, stub: Function,
+    def _texture(self, b: Builder, index: int, module: Module, placeholder: Function,
                  what: str) -> Value:
-        """``scene_texture_eval(index, ...)`` with ``stub``'s arguments of the same names."""
+        """``scene_texture_eval(index, ...)`` with ``placeholder``'s arguments of the same names."""
         tex = module.functions.get(TEXTURE_PLACEHOLDER)
         if not 0 <= index < len(self.scene.textures):
             raise CompileError(f"{what}: texture {index} is not one of the scene's "
                                f"{len(self.scene.textures)} texture(s)")
-        if tex is None or stub.name == TEXTURE_PLACEHOLDER:
+        if tex is None or placeholder.name == TEXTURE_PLACEHOLDER:
             why = ("textures of textures are not supported" if tex is not None
                    else f"`{TEXTURE_PLACEHOLDER}` is not defined (import render.scene)")
             raise CompileError(f"{what}: cannot evaluate a texture here: {why}")
-        ours = {p.value.name: p.value for p in stub.params}
+        ours = {p.value.name: p.value for p in placeholder.params}
         operands = [b.const(index, I32)]
         for p in tex.params[1:]:
             if p.value.name == PARAM_BUFFER:
@@ -295,7 +295,7 @@ class Specialize(Pass):
             v = ours.get(p.value.name)
             if v is None or v.type != p.value.type:
                 raise CompileError(f"{what}: a texture needs the argument `{p.value.name}: "
-                                   f"{p.value.type}`, which `{stub.name}` does not have")
+                                   f"{p.value.type}`, which `{placeholder.name}` does not have")
             operands.append(v)
         return b.emit(Op.CALL, operands, list(tex.ret_types), {"callee": tex.name}).result
 

@@ -149,31 +149,16 @@ def _emitter_row(em: Any, what: str) -> tuple[np.ndarray, np.ndarray | None]:
 
 
 def read_bitmap(path: str | Path, what: str = "bitmap", loc: Any = None) -> np.ndarray:
-    """An image as linear float (H, W, 3): EXR as stored, 8-bit PNG/JPEG decoded from sRGB
-    (as Mitsuba's Bitmap does for emitters)."""
-    path = Path(path)
-    try:
-        if path.suffix.lower() == ".exr":
-            from .image import read_exr
+    """An image as linear float (H, W, 3), read like a bitmap texture (EXR as stored, 8-bit
+    PNG/JPEG decoded from sRGB, as Mitsuba's Bitmap does); errors name the emitter."""
+    from .textures import load_bitmap
 
-            img = np.asarray(read_exr(path), np.float64)
-        else:
-            try:
-                from PIL import Image
-            except ImportError:
-                raise CompileError(f"{what}: reading {path.suffix} images needs Pillow "
-                                   "(pip install pillow)", loc) from None
-            with Image.open(path) as im:
-                im = im.convert("RGBA" if "A" in im.getbands() else "RGB")
-                img = np.asarray(im, np.float64) / 255.0
-            img = np.where(img <= 0.04045, img / 12.92, ((img + 0.055) / 1.055) ** 2.4)
+    try:
+        return load_bitmap(path)
+    except RuntimeError as e:  # Pillow missing
+        raise CompileError(f"{what}: {e}", loc) from None
     except OSError as e:
         raise CompileError(f"{what}: cannot read `{path}`: {e}", loc) from None
-    if img.ndim == 2:
-        img = img[:, :, None]
-    if img.shape[2] == 1 or img.shape[2] == 2:
-        img = np.repeat(img[:, :, :1], 3, axis=2)
-    return np.ascontiguousarray(img[:, :, :3])
 
 
 def envmap_tables(image: np.ndarray) -> tuple[np.ndarray, tuple[int, int]]:

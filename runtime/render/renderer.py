@@ -74,11 +74,6 @@ def _rgb(value: Any, what: str) -> tuple[float, float, float] | float:
     raise CompileError(f"{what}: textures are not supported by the renderer yet")
 
 
-def _bsdf_instance(plugin: Any, textures: TextureTable | None = None) -> Instance:
-    """Parameter mapping and combinators: runtime/render/bsdfs.py."""
-    return bsdf_instance(plugin, textures)
-
-
 def flatten(desc: Any) -> tuple[SceneBuffers, list[Instance], list[Instance]]:
     """Concatenate the scene's meshes and collect its BSDF and emitter instances."""
     P, N, UV, F, G = [], [], [], [], []
@@ -110,7 +105,7 @@ def flatten(desc: Any) -> tuple[SceneBuffers, list[Instance], list[Instance]]:
         key = id(shape.bsdf)
         if key not in bsdf_ids:
             bsdf_ids[key] = len(bsdfs)
-            bsdfs.append(_bsdf_instance(shape.bsdf, textures))
+            bsdfs.append(bsdf_instance(shape.bsdf, textures))
         emitter = -1
         if shape.emitter is not None:
             em = shape.emitter
