@@ -363,6 +363,8 @@ class _Interp:
                 args = out[1:]
                 if not out[0]:
                     return args
+        if op is Op.TABLE:
+            return [np.asarray(ins.attrs["values"], np.float32)]
         if op in (Op.LOAD, Op.GATHER):
             if op is Op.GATHER and not args[2]:
                 return [coerce(0, ins.results[0].type)]

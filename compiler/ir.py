@@ -287,7 +287,13 @@ class Op(enum.Enum):
     # spectrum (abstract until lift)
     SPEC_AVG = "spec.avg"  # mean over the spectrum's components -> f32
     SPEC_MAX = "spec.max"  # max component -> f32
-    SPEC_RGB = "spec.from_rgb"  # (r, g, b) f32 -> spectrum (reflectance upsampling)
+    SPEC_RGB = "spec.from_rgb"  # (r, g, b) f32 -> spectrum; attrs: illuminant, spectrum
+    SPEC_MAKE = "spec.make"  # one f32 per component (spectral: 4) -> spectrum
+    SPEC_SET = "spec.set_wavelengths"  # spectrum: this sample's wavelengths (nm), no result
+    SPEC_LAMBDA = "spec.wavelengths"  # -> spectrum: this sample's wavelengths (nm)
+    SPEC_SRGB = "spec.to_srgb"  # spectrum -> vec3 linear sRGB
+    # constant data
+    TABLE = "table"  # attrs: values (floats) -> buffer<f32> (read-only)
     # memory
     LOAD = "load"  # load %buf, %index
     STORE = "store"  # store %buf, %index, %value
@@ -316,7 +322,7 @@ ELEMENTWISE_OPS = ARITH_OPS | BIT_OPS | MATH_OPS
 TERMINATORS = {Op.YIELD, Op.RETURN}
 SIDE_EFFECT_OPS = {Op.STORE, Op.SCATTER, Op.CALL, Op.YIELD, Op.RETURN}
 PURE_OPS = set(Op) - SIDE_EFFECT_OPS - {Op.IF, Op.LOOP, Op.LOAD, Op.GATHER, Op.INTERSECT,
-                                        Op.OCCLUDED}
+                                        Op.OCCLUDED, Op.SPEC_SET}
 
 # --------------------------------------------------------------------------------------
 # Values, instructions, blocks

@@ -37,7 +37,7 @@ from .types import (
 BUILTIN_FNS = {
     "sqrt", "floor", "ceil", "abs", "min", "max", "select", "bits", "from_bits", "Float", "Int",
     "UInt", "UInt64", "Bool", "Vec2", "Vec3", "Vec4", "Mat3", "Mat4", "Spectrum", "mean",
-    "max_value", "trace", "occluded",
+    "max_value", "trace", "occluded", "illuminant", "set_wavelengths", "wavelengths", "to_srgb",
 }
 
 
@@ -134,11 +134,22 @@ def check_builtin(e: A.Call, name: str, args: list[A.Expr], types: list[Type | N
         if total != n:
             raise err(f"`{name}` needs {n} components, found {total}", loc)
         return finish(want)
-    if name == "Spectrum":
-        nargs(1, 3)
+    if name in ("Spectrum", "illuminant"):
+        nargs(*((1, 3, 4) if name == "Spectrum" else (3, 4)))
         for i in range(len(args)):
             arg(i, F32)
         return finish(SPECTRUM)
+    if name == "set_wavelengths":
+        nargs(1)
+        arg(0, SPECTRUM)
+        return finish(None)
+    if name == "wavelengths":
+        nargs(0)
+        return finish(SPECTRUM)
+    if name == "to_srgb":
+        nargs(1)
+        arg(0, SPECTRUM)
+        return finish(VecType(3))
     if name in ("mean", "max_value"):
         nargs(1)
         arg(0, SPECTRUM)

@@ -504,6 +504,9 @@ class _FnLowerer:
             return self.env[what]
         args = [self.expr(a) for a in e.args]
         name = what
+        if name == "set_wavelengths":
+            self.b.emit(Op.SPEC_SET, args, [], loc=loc)
+            return None
         assert t is not None
         if name in _MATH:
             return self.op(loc, _MATH[name], t, *args)
@@ -513,6 +516,8 @@ class _FnLowerer:
             return self.op(loc, Op.BITCAST, t, args[0])
         if name in ("Float", "Int", "UInt", "UInt64", "Bool"):
             return args[0] if args[0].type == t else self.op(loc, Op.CAST, t, args[0])
+        if name == "to_srgb":
+            return self.op(loc, Op.SPEC_SRGB, t, *args)
         if isinstance(t, (VecType, MatType)):
             if len(args) == 1 and isinstance(t, VecType):
                 return self.op(loc, Op.BROADCAST, t, args[0])
@@ -526,7 +531,12 @@ class _FnLowerer:
         if name == "Spectrum":
             if len(args) == 1:
                 return self.op(loc, Op.BROADCAST, t, args[0])
-            return self.op(loc, Op.SPEC_RGB, t, *args)
+            return self.op(loc, Op.SPEC_RGB if len(args) == 3 else Op.SPEC_MAKE, t, *args)
+        if name == "illuminant":
+            return self.op(loc, Op.SPEC_RGB, t, *args, illuminant=True)
+        if name == "wavelengths":
+            return self.op(loc, Op.SPEC_LAMBDA, t)
+
         if name == "mean":
             return self.op(loc, Op.SPEC_AVG, F32, args[0])
         if name == "max_value":

@@ -6,6 +6,8 @@ contraction, integer division by zero guarded, saturating float-to-int casts.
 
 from __future__ import annotations
 
+import hashlib
+
 from collections.abc import Callable
 from typing import Any
 
@@ -312,6 +314,21 @@ def _lower_lane(lw: Lowering, ins: ir.Instr) -> L.Value:
     return L.Constant(ty, [L.Constant(ty.element, i) for i in range(ty.count)])
 
 
+def _lower_table(lw: Lowering, ins: ir.Instr) -> L.Value:
+    """A read-only table: a private constant global, one per distinct contents."""
+    values = [float(np.float32(v)) for v in ins.attrs["values"]]
+    mod = lw.b.module
+    name = "rdsl_table_" + hashlib.sha1(np.asarray(values, np.float32).tobytes()).hexdigest()[:16]
+    if name not in mod.globals:
+        aty = L.ArrayType(L.FloatType(), len(values))
+        g = L.GlobalVariable(mod, aty, name)
+        g.global_constant = True
+        g.linkage = "private"
+        g.initializer = L.Constant(aty, values)
+        g.align = 16
+    return mod.globals[name]
+
+
 def _buf_elem(buf: ir.Value) -> ir.ScalarType:
     t = buf.type
     assert isinstance(t, ir.BufferType), t
@@ -457,6 +474,7 @@ LOWER: dict[ir.Op, Callable[[Lowering, ir.Instr], L.Value | list[L.Value] | None
     ir.Op.ANY: _lower_any,
     ir.Op.LANE: _lower_lane,
     ir.Op.LOAD: _lower_load,
+    ir.Op.TABLE: _lower_table,
     ir.Op.STORE: _lower_store,
     ir.Op.GATHER: _lower_gather,
     ir.Op.SCATTER: _lower_scatter,

@@ -4,18 +4,40 @@ Expects: an inlined module (no calls) whose values may have type ``spectrum`` or
 containing it, ``spec.*`` ops, and ``const trait "<name>"`` booleans from ``if const``.
 
 Guarantees: no value has a ``spectrum`` type; no ``spec.*`` op and no trait constant
-remains.  What each variant's spectrum becomes is described by a :class:`SpectrumModel`, so
-the spectral and polarized models plug in beside mono and rgb without touching the rest of
-the pass.
+remains, and the branches of ``if const`` that the variant does not take are gone (so code
+valid in one variant only may sit inside them).  What each variant's spectrum becomes is
+described by a :class:`SpectrumModel`.
+
+Spectral variants (``n = 4``) carry the four wavelengths of a sample as an implicit value:
+``set_wavelengths(wl)`` in the kernel's top-level block defines it, and every colour after it
+is evaluated there.  Colours become spectra as in Mitsuba 3:
+
+* ``Spectrum(r, g, b)`` with constant arguments is a reflectance: the Jakob & Hanika 2019
+  sigmoid polynomial whose sRGB colour is (r, g, b), its coefficients found at compile time.
+  With a tabulated spectrum attached (``spectrum`` attribute, from a scene's ``<spectrum>``),
+  that table is interpolated instead.
+* ``illuminant(r, g, b)`` is an emitted colour: the upsampled colour, scaled, times the D65
+  illuminant (Mitsuba's ``d65`` plugin), so that white light stays white.
+* With arguments read from buffers, the runtime has stored coefficients there (and, for
+  ``illuminant(c0, c1, c2, scale)``, the scale): they are evaluated as they are.  Other
+  computed arguments are a diagnostic: there is no run-time RGB fit.
+* ``to_srgb(s)`` integrates the four samples against the CIE 1931 curves (the weights of
+  the wavelength sampling must already be in ``s``) and converts XYZ to linear sRGB.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
 
 from ..diagnostics import CompileError, Diagnostic
 from ..ir import (
+    BOOL,
     F32,
+    I32,
+    BufferType,
     Block,
     Builder,
     Instr,
@@ -54,6 +76,7 @@ class SpectrumModel:
 MODELS = {
     "mono": SpectrumModel("mono", 1, frozenset({"mono"})),
     "rgb": SpectrumModel("rgb", 3, frozenset({"rgb"})),
+    "spectral": SpectrumModel("spectral", 4, frozenset({"spectral"})),
 }
 
 
@@ -94,10 +117,47 @@ class Lift(Pass):
                 p.value.type = self.lift_type(p.value.type)
             fn.ret_types = [self.lift_type(t) for t in fn.ret_types]
             mapping: dict[Value, Value] = {}
-            self._block(fn.body, mapping)
+            self.traits: set[Value] = set()
+            self._fold_traits(fn.body, mapping)
             replace_uses(fn.body, mapping)
+            self.spectral = _Spectral(self.model, fn.loc) if self.model.n == 4 else None
+            mapping = {}
+            self._block(fn.body, mapping, top=True)
+            replace_uses(fn.body, mapping)
+            if self.spectral is not None:
+                fn.body.instrs[:0] = self.spectral.tables.block.instrs
 
-    def _block(self, block: Block, mapping: dict[Value, Value]) -> None:
+    def _fold_traits(self, block: Block, mapping: dict[Value, Value]) -> None:
+        """Trait constants become booleans and the branches they rule out disappear (their
+        results map, possibly through a chain, to the values the taken branch yields)."""
+        def find(v: Value) -> Value:
+            while v in mapping:
+                v = mapping[v]
+            return v
+
+        out: list[Instr] = []
+        work = list(block.instrs)
+        while work:
+            ins = work.pop(0)
+            ins.operands = [find(v) for v in ins.operands]
+            if ins.op is Op.CONST and "trait" in ins.attrs:
+                ins.attrs = {"value": ins.attrs["trait"] in self.model.traits}
+                self.traits.add(ins.result)
+            if ins.op is Op.IF and ins.operands[0] in self.traits:
+                cond = ins.operands[0].owner.attrs["value"]
+                taken = ins.regions[0 if cond else 1]
+                work[:0] = taken.instrs[:-1]
+                for r, v in zip(ins.results, taken.instrs[-1].operands):
+                    mapping[r] = v
+                continue
+            for r in ins.regions:
+                self._fold_traits(r, mapping)
+            out.append(ins)
+        block.instrs = out
+        for k in list(mapping):
+            mapping[k] = find(k)
+
+    def _block(self, block: Block, mapping: dict[Value, Value], top: bool = False) -> None:
         for a in block.args:
             a.type = self.lift_type(a.type)
         out: list[Instr] = []
@@ -107,7 +167,11 @@ class Lift(Pass):
             for r in ins.results:
                 r.type = self.lift_type(r.type)
             b = Builder(Block(), ins.loc)
-            replaced = self._rewrite(ins, b, [mapping.get(v, v) for v in ins.operands])
+            ops = [mapping.get(v, v) for v in ins.operands]
+            if ins.op is Op.SPEC_SET:
+                self._set_wavelengths(ins, ops[0], top)
+                continue
+            replaced = self._rewrite(ins, b, ops)
             if replaced is None:
                 out.append(ins)
             else:
@@ -115,11 +179,24 @@ class Lift(Pass):
                 mapping[ins.result] = replaced
         block.instrs = out
 
+    def _set_wavelengths(self, ins: Instr, wl: Value, top: bool) -> None:
+        if self.spectral is None:
+            return  # only spectral variants have wavelengths; the call is dropped
+        if not top:
+            raise CompileError([Diagnostic(ins.loc, "`set_wavelengths` must be called in the "
+                                           "kernel's top-level block, not inside a branch "
+                                           "or loop")])
+        if self.spectral.wavelengths is not None:
+            raise CompileError([Diagnostic(ins.loc, "the wavelengths are already set")])
+        self.spectral.wavelengths = wl
+
+    def _fail(self, ins: Instr, msg: str) -> CompileError:
+        return CompileError([Diagnostic(ins.loc, msg)])
+
     def _rewrite(self, ins: Instr, b: Builder, ops: list[Value]) -> Value | None:
         """Return the replacement of ``ins``'s result, or None to keep ``ins``."""
         n = self.model.n
-        if ins.op is Op.CONST and "trait" in ins.attrs:
-            return b.const(ins.attrs["trait"] in self.model.traits, ins.type)
+        variant = self.model.variant
         if ins.op is Op.BROADCAST and n == 1 and isinstance(ops[0].type, ScalarType) \
                 and ins.type == ops[0].type:
             return ops[0]
@@ -127,19 +204,39 @@ class Lift(Pass):
             return self._reduce(b, ops[0], Op.ADD, divide=True)
         if ins.op is Op.SPEC_MAX:
             return self._reduce(b, ops[0], Op.MAX)
-        if ins.op is Op.SPEC_RGB:
+        if ins.op is Op.SPEC_MAKE:
+            if len(ops) != n:
+                raise self._fail(ins, f"a Spectrum of {len(ops)} components does not exist in "
+                                 f"the `{variant}` variant ({n} component"
+                                 f"{'s' if n > 1 else ''}); use it inside `if const`")
+            return b.op(Op.MAKE, ins.type, *ops) if n > 1 else ops[0]
+        if ins.op is Op.SPEC_LAMBDA:
+            if self.spectral is None:
+                raise self._fail(ins, f"`wavelengths()` has no meaning in the `{variant}` "
+                                 "variant; use it inside `if const spectral`")
+            return self.spectral.lam(ins)
+        if ins.op is Op.SPEC_SRGB:
             if n == 3:
-                return b.op(Op.MAKE, ins.type, *ops)
+                return ops[0]
             if n == 1:
-                acc = None
-                for w, v in zip(_LUMINANCE, ops):
-                    term = b.op(Op.MUL, F32, b.const(w, F32), v)
-                    acc = term if acc is None else b.op(Op.ADD, F32, acc, term)
-                return acc
-            raise CompileError([Diagnostic(ins.loc, "Spectrum(r, g, b) needs RGB upsampling, "
-                                           f"not available in `{self.model.variant}`")])
+                return b.op(Op.MAKE, ins.type, ops[0], ops[0], ops[0])
+            return self.spectral.to_srgb(b, ins, ops[0])
+        if ins.op is Op.SPEC_RGB:
+            illum = bool(ins.attrs.get("illuminant"))
+            if n == 4:
+                return self.spectral.from_rgb(b, ins, ops, illum)
+            rgb = ops[:3]
+            if n == 3:
+                out = b.op(Op.MAKE, ins.type, *rgb)
+                return out if len(ops) == 3 else b.op(Op.MUL, ins.type, out,
+                                                      b.op(Op.BROADCAST, ins.type, ops[3]))
+            acc = None
+            for w, v in zip(_LUMINANCE, rgb):
+                term = b.op(Op.MUL, F32, b.const(w, F32), v)
+                acc = term if acc is None else b.op(Op.ADD, F32, acc, term)
+            return acc if len(ops) == 3 else b.op(Op.MUL, F32, acc, ops[3])
         if ins.op in (Op.MUL, Op.DIV) and isinstance(ins.type, MatType):
-            raise CompileError([Diagnostic(ins.loc, "matrix spectra are not supported here")])
+            raise self._fail(ins, "matrix spectra are not supported here")
         return None
 
     def _reduce(self, b: Builder, v: Value, op: Op, divide: bool = False) -> Value:
@@ -152,3 +249,147 @@ class Lift(Pass):
         if divide:
             acc = b.op(Op.DIV, F32, acc, b.const(float(self.model.n), F32))
         return acc
+
+
+
+class _Spectral:
+    """The spectral variant's lowering of colours, for one kernel: its wavelengths and the
+    constant tables (CIE 1931, D65, tabulated spectra) it reads, placed at the kernel's top."""
+
+    def __init__(self, model: SpectrumModel, loc: Any) -> None:
+        from ...runtime import spectral as data  # numpy only: the measured curves and fits
+
+        self.data = data
+        self.model = model
+        self.wavelengths: Value | None = None
+        self.tables = Builder(Block(), loc)
+        self._tables: dict[bytes, Value] = {}
+
+    def lam(self, ins: Instr) -> Value:
+        if self.wavelengths is None:
+            raise CompileError([Diagnostic(ins.loc, "a colour is used before the wavelengths "
+                                           "are set: call `set_wavelengths` (or "
+                                           "`sample_wavelengths`) first, in the kernel's "
+                                           "top-level block")])
+        return self.wavelengths
+
+    def table(self, values: Any) -> Value:
+        arr = np.asarray(values, np.float32)
+        key = arr.tobytes()
+        if key not in self._tables:
+            self._tables[key] = self.tables.op(Op.TABLE, BufferType(F32),
+                                               values=[float(x) for x in arr])
+        return self._tables[key]
+
+    # -- building blocks -----------------------------------------------------------------
+    def vec(self, b: Builder, x: float) -> Value:
+        return b.op(Op.BROADCAST, VecType(4), b.const(float(x), F32))
+
+    def components(self, b: Builder, v: Value) -> list[Value]:
+        return [b.op(Op.EXTRACT, F32, v, index=i) for i in range(4)]
+
+    def sample_table(self, b: Builder, table: Value, lam: Value) -> Value:
+        """Linear interpolation of a table on the 5 nm grid over [360, 830] nm at one
+        wavelength; 0 outside (as Mitsuba's ``cie1931_xyz`` and ``d65``)."""
+        d = self.data
+        last = d.CIE_SAMPLES - 1
+        step = (d.LAMBDA_MAX - d.LAMBDA_MIN) / last
+        t = b.op(Op.MUL, F32, b.op(Op.SUB, F32, lam, b.const(d.LAMBDA_MIN, F32)),
+                 b.const(1.0 / step, F32))
+        i = b.op(Op.CAST, I32, b.op(Op.FLOOR, F32, t))
+        i = b.op(Op.MIN, I32, b.op(Op.MAX, I32, i, b.const(0, I32)), b.const(last - 1, I32))
+        f = b.op(Op.SUB, F32, t, b.op(Op.CAST, F32, i))
+        v0 = b.op(Op.LOAD, F32, table, i)
+        v1 = b.op(Op.LOAD, F32, table, b.op(Op.ADD, I32, i, b.const(1, I32)))
+        v = b.op(Op.ADD, F32, v0, b.op(Op.MUL, F32, b.op(Op.SUB, F32, v1, v0), f))
+        inside = b.op(Op.AND, BOOL, b.op(Op.GE, BOOL, lam, b.const(d.LAMBDA_MIN, F32)),
+                      b.op(Op.LE, BOOL, lam, b.const(d.LAMBDA_MAX, F32)))
+        return b.op(Op.SELECT, F32, inside, v, b.const(0.0, F32))
+
+    def sample_spectrum(self, b: Builder, ins: Instr, values: Any) -> Value:
+        table = self.table(values)
+        lam = self.components(b, self.lam(ins))
+        return b.op(Op.MAKE, VecType(4), *[self.sample_table(b, table, x) for x in lam])
+
+    def sigmoid_poly(self, b: Builder, ins: Instr, c: list[Value]) -> Value:
+        """Jakob & Hanika's model at the wavelengths: s(c0 l^2 + c1 l + c2), s(x) =
+        1/2 + x / (2 sqrt(1 + x^2)); x is clamped so that x^2 stays finite."""
+        v4 = VecType(4)
+        lam = self.lam(ins)
+        cs = [b.op(Op.BROADCAST, v4, x) for x in c]
+        x = b.op(Op.ADD, v4, b.op(Op.MUL, v4, b.op(Op.ADD, v4, b.op(Op.MUL, v4, cs[0], lam),
+                                                   cs[1]), lam), cs[2])
+        x = b.op(Op.MIN, v4, b.op(Op.MAX, v4, x, self.vec(b, -1e18)), self.vec(b, 1e18))
+        r = b.op(Op.SQRT, v4, b.op(Op.ADD, v4, b.op(Op.MUL, v4, x, x), self.vec(b, 1.0)))
+        half = self.vec(b, 0.5)
+        return b.op(Op.ADD, v4, b.op(Op.MUL, v4, half, b.op(Op.DIV, v4, x, r)), half)
+
+    def d65(self, b: Builder, ins: Instr) -> Value:
+        return self.sample_spectrum(b, ins, np.asarray(self.data.d65_table())
+                                    * self.data.D65_NORMALIZATION)
+
+    # -- the ops -------------------------------------------------------------------------
+    def from_rgb(self, b: Builder, ins: Instr, ops: list[Value], illuminant: bool) -> Value:
+        d = self.data
+        v4 = VecType(4)
+        consts = [_const_value(v) for v in ops]
+        if all(c is not None for c in consts):
+            rgb = np.asarray(consts[:3], np.float64)
+            scale = consts[3] if len(consts) == 4 else 1.0
+            if "spectrum" in ins.attrs:  # a tabulated spectrum the scene gave
+                wl, vals = ins.attrs["spectrum"]
+                out = self.sample_spectrum(b, ins, d.resample(wl, vals))
+            elif illuminant:
+                coeffs, s = d.illuminant_from_rgb(rgb)
+                out = b.op(Op.MUL, v4, self.sigmoid_poly(
+                    b, ins, [b.const(float(x), F32) for x in coeffs]), self.d65(b, ins))
+                scale *= s
+            else:
+                coeffs = d.rgb_to_coeffs(rgb)
+                out = self.sigmoid_poly(b, ins, [b.const(float(x), F32) for x in coeffs])
+            if scale != 1.0:
+                out = b.op(Op.MUL, v4, out, self.vec(b, scale))
+            return out
+        if not all(isinstance(v.owner, Instr) and v.owner.op is Op.LOAD for v in ops):
+            raise CompileError([Diagnostic(ins.loc, "the spectral variant upsamples constant "
+                                           "colours and colours read from the scene's "
+                                           "buffers only; this one is computed")])
+        out = self.sigmoid_poly(b, ins, ops[:3])
+        if illuminant:
+            out = b.op(Op.MUL, v4, out, self.d65(b, ins))
+        if len(ops) == 4:
+            out = b.op(Op.MUL, v4, out, b.op(Op.BROADCAST, v4, ops[3]))
+        return out
+
+    def to_srgb(self, b: Builder, ins: Instr, s: Value) -> Value:
+        """Mitsuba's spectral film: XYZ = mean over the wavelengths of cie(l) s(l) /
+        CIE_Y_INTEGRAL, then linear sRGB."""
+        d = self.data
+        cie = np.asarray(d.cie_table(), np.float64)
+        tables = [self.table(cie[:, k]) for k in range(3)]
+        lam = self.components(b, self.lam(ins))
+        vals = self.components(b, s)
+        xyz = []
+        for k in range(3):
+            acc = None
+            for x, v in zip(lam, vals):
+                term = b.op(Op.MUL, F32, self.sample_table(b, tables[k], x), v)
+                acc = term if acc is None else b.op(Op.ADD, F32, acc, term)
+            xyz.append(b.op(Op.MUL, F32, acc, b.const(1.0 / (4.0 * d.CIE_Y_INTEGRAL), F32)))
+        rgb = []
+        for row in np.asarray(d.XYZ_TO_SRGB, np.float64):
+            acc = None
+            for w, v in zip(row, xyz):
+                term = b.op(Op.MUL, F32, b.const(float(w), F32), v)
+                acc = term if acc is None else b.op(Op.ADD, F32, acc, term)
+            rgb.append(acc)
+        return b.op(Op.MAKE, ins.type, *rgb)
+
+
+def _const_value(v: Value) -> float | None:
+    """The f32 value a ``const`` instruction gives ``v`` (as a Python float), else None."""
+    ins = v.owner
+    if isinstance(ins, Instr) and ins.op is Op.CONST and "value" in ins.attrs \
+            and "trait" not in ins.attrs:
+        return float(np.float32(ins.attrs["value"]))
+    return None

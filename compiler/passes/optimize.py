@@ -42,7 +42,7 @@ from ..ir import (
 from . import Pass, register
 
 MAX_ITERATIONS = 50
-_EFFECT_OPS = {Op.STORE, Op.SCATTER, Op.CALL, Op.RETURN}
+_EFFECT_OPS = {Op.STORE, Op.SCATTER, Op.CALL, Op.RETURN, Op.SPEC_SET}
 
 
 def _attr_key(v: Any) -> Any:

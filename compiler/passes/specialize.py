@@ -86,10 +86,23 @@ class TextureRef:
 @dataclass(frozen=True)
 class Slot:
     """A parameter value read at run time from ``PRM[offset:offset + size]`` (the generic
-    build).  Ints and bools are stored as floats (exact below 2**24) and converted back."""
+    build).  Ints and bools are stored as floats (exact below 2**24) and converted back.  A
+    colour of a spectral build is 4 floats: its upsampling coefficients and a scale."""
 
     offset: int
     size: int
+    illuminant: bool = False
+
+
+@dataclass(frozen=True)
+class SpectrumValue:
+    """A colour parameter: its linear sRGB value, the tabulated spectrum the scene gave if
+    any (wavelengths in nm, values), and whether it is emitted light (an illuminant, which
+    spectral variants upsample with D65, as Mitsuba 3) rather than a reflectance."""
+
+    rgb: tuple[float, float, float]
+    samples: tuple[tuple[float, ...], tuple[float, ...]] | None = None
+    illuminant: bool = False
 
 
 @dataclass
@@ -118,16 +131,32 @@ class SceneSpec:
     emitter_kinds: tuple[int, ...] | None = None
 
 
-def parameter_slots(scene: SceneSpec) -> tuple[SceneSpec, np.ndarray]:
+def parameter_slots(scene: SceneSpec, variant: str = "rgb") -> tuple[SceneSpec, np.ndarray]:
     """The generic build's scene: every parameter value the scene sets (textures aside)
     becomes a :class:`Slot` into the returned float32 buffer ``PRM``, which holds the values,
     instance after instance (colors and vectors as their components; empty if the scene sets
-    no parameter, and then the kernels take no ``PRM``)."""
+    no parameter, and then the kernels take no ``PRM``).  In the spectral variant a colour
+    is stored as its upsampling coefficients and scale; a tabulated spectrum stays folded."""
     values: list[float] = []
 
     def slot(value: Any, what: str) -> Any:
         if isinstance(value, (TextureRef, Slot)):
             return value
+        if isinstance(value, SpectrumValue):
+            if variant != "spectral":
+                value = value.rgb
+            elif value.samples is not None:
+                return value
+            else:
+                from ...runtime import spectral
+
+                # the f32 values the specialized build's constants hold: the same fit
+                rgb = np.asarray(value.rgb, np.float32).astype(np.float64)
+                coeffs, scale = (spectral.illuminant_from_rgb(rgb) if value.illuminant
+                                 else (spectral.rgb_to_coeffs(rgb), 1.0))
+                out = Slot(len(values), 4, value.illuminant)
+                values.extend([*(float(c) for c in coeffs), float(scale)])
+                return out
         xs = list(value) if isinstance(value, (tuple, list, np.ndarray)) else [value]
         for x in xs:
             if isinstance(x, (int, np.integer)) and not isinstance(x, bool) and \
@@ -308,6 +337,11 @@ def _constant(b: Builder, t: Type, value: Any, what: str) -> Value:
         py = {"f32": float, "i32": int, "u32": int, "u64": int, "bool": bool}[t.name]
         return b.const(py(value), t)
     if isinstance(t, SpectrumType):
+        if isinstance(value, SpectrumValue):
+            attrs: dict[str, Any] = {"illuminant": True} if value.illuminant else {}
+            if value.samples is not None:
+                attrs["spectrum"] = [list(value.samples[0]), list(value.samples[1])]
+            return b.op(Op.SPEC_RGB, t, *[b.const(float(v), F32) for v in value.rgb], **attrs)
         if isinstance(value, (tuple, list)):
             if len(value) == 1:
                 value = value[0]
@@ -345,8 +379,10 @@ def _load(b: Builder, t: Type, slot: Slot, prm: Value, what: str) -> Value:
         if t.name == "bool":
             return b.op(Op.NE, BOOL, xs[0], b.const(0.0, F32))
         return b.op(Op.CAST, t, xs[0])
-    if isinstance(t, SpectrumType) and slot.size in (1, 3):
-        return b.op(Op.BROADCAST, t, xs[0]) if slot.size == 1 else b.op(Op.SPEC_RGB, t, *xs)
+    if isinstance(t, SpectrumType) and slot.size in (1, 3, 4):
+        if slot.size == 1:
+            return b.op(Op.BROADCAST, t, xs[0])
+        return b.op(Op.SPEC_RGB, t, *xs, **({"illuminant": True} if slot.illuminant else {}))
     if isinstance(t, VecType) and slot.size in (1, t.n):
         return b.op(Op.MAKE, t, *(xs * t.n if slot.size == 1 else xs))
     raise CompileError(f"{what}: {slot.size} value(s) cannot set a parameter of type `{t}`")

@@ -25,6 +25,7 @@ from typing import Any
 
 from ...compiler.diagnostics import CompileError
 from ...compiler.passes.specialize import Instance
+from .colors import spectrum_value
 from ..scene.schema import spec_for
 
 STDLIB = Path(__file__).resolve().parents[2] / "stdlib"
@@ -61,9 +62,8 @@ def _value(plugin: Any, name: str, value: Any, textures: Any) -> Any:
             raise CompileError(f"{_where(plugin)}: a texture for `{name}` is not supported by "
                                "the renderer yet", plugin.loc)
         return textures.ref(value, what)
-    rgb = getattr(value, "rgb", None)
-    if rgb is not None:
-        return tuple(float(x) for x in rgb)
+    if getattr(value, "rgb", None) is not None:
+        return spectrum_value(value, what, loc=plugin.loc)
     if isinstance(value, (bool, int, float)):
         return value
     raise CompileError(f"{_where(plugin)}: cannot pass `{name}` = {value!r} to the rdsl "

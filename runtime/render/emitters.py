@@ -15,6 +15,7 @@ from typing import Any
 import numpy as np
 
 from ...compiler.diagnostics import CompileError
+from .colors import emission_row
 
 KINDS = {"area": 0, "point": 1, "spot": 2, "directional": 3, "constant": 4, "envmap": 5}
 ENVIRONMENTS = ("constant", "envmap")
@@ -58,7 +59,7 @@ def _linear_part(m: np.ndarray, what: str, loc: Any, rigid: bool) -> np.ndarray:
 
 
 def emitter_tables(desc: Any, lights: list[tuple[int, int, float]],
-                   area_emitters: int) -> EmitterTables:
+                   area_emitters: int, variant: str = "rgb") -> EmitterTables:
     """Tables for the scene's emitters.  ``lights`` holds (triangle, shape, area) for every
     triangle of the area-lit shapes, in shape order; ``area_emitters`` counts those shapes."""
     LC, LT, EK, E = [], [], [], []
@@ -92,7 +93,7 @@ def emitter_tables(desc: Any, lights: list[tuple[int, int, float]],
                 raise CompileError(f"{what}: only one environment emitter (constant or "
                                    "envmap) can be specified per scene", em.loc)
             env = len(EK)
-        row, table = _emitter_row(em, what)
+        row, table = _emitter_row(em, what, variant)
         if table is not None:
             ENV = table
         EK.append((KINDS[em.type], 0, 0, 0))
@@ -106,11 +107,17 @@ def emitter_tables(desc: Any, lights: list[tuple[int, int, float]],
         np.ascontiguousarray(ENV, np.float32), len(EK), env)
 
 
-def _emitter_row(em: Any, what: str) -> tuple[np.ndarray, np.ndarray | None]:
+def _put_color(row: np.ndarray, value: Any, what: str, loc: Any, variant: str) -> None:
+    """An emitted colour at row[0:3] with its scale at row[23] (lights.rdsl load_spectrum)."""
+    row[0:3], row[23] = emission_row(_color(value, what, loc), variant)
+
+
+def _emitter_row(em: Any, what: str, variant: str = "rgb"
+                 ) -> tuple[np.ndarray, np.ndarray | None]:
     """The E row of one non-area emitter, and its ENV table for an envmap."""
     p, row = em.params, np.zeros(STRIDE)
     if em.type == "point":
-        row[0:3] = _color(p["intensity"], f"{what}: 'intensity'", em.loc)
+        _put_color(row, p["intensity"], f"{what}: 'intensity'", em.loc, variant)
         row[3:6] = p["to_world"][:3, 3]
     elif em.type == "spot":
         if p.get("texture") is not None:
@@ -124,17 +131,20 @@ def _emitter_row(em: Any, what: str) -> tuple[np.ndarray, np.ndarray | None]:
             raise CompileError(f"{what}: 'beam_width' ({p['beam_width']}) must be between 0 "
                                f"and 'cutoff_angle' ({p['cutoff_angle']})", em.loc)
         lin = _linear_part(p["to_world"], what, em.loc, rigid=False)
-        row[0:3] = _color(p["intensity"], f"{what}: 'intensity'", em.loc)
+        _put_color(row, p["intensity"], f"{what}: 'intensity'", em.loc, variant)
         row[3:6] = p["to_world"][:3, 3]
         row[6:15] = np.linalg.inv(lin).reshape(-1)
         row[15:19] = (np.cos(cutoff), np.cos(beam), cutoff,
                       1.0 / (cutoff - beam) if cutoff > beam else 3.0e38)
     elif em.type == "directional":
-        row[0:3] = _color(p["irradiance"], f"{what}: 'irradiance'", em.loc)
+        _put_color(row, p["irradiance"], f"{what}: 'irradiance'", em.loc, variant)
         row[3:6] = p["direction"]
     elif em.type == "constant":
-        row[0:3] = _color(p["radiance"], f"{what}: 'radiance'", em.loc)
+        _put_color(row, p["radiance"], f"{what}: 'radiance'", em.loc, variant)
     else:  # envmap
+        if variant == "spectral":
+            raise CompileError(f"{what}: an environment map is not supported by the spectral "
+                               "variant yet (use rgb, or a constant emitter)", em.loc)
         if p.get("filter_type", "bilinear") != "bilinear":
             raise CompileError(f"{what}: filter_type '{p['filter_type']}' is not supported "
                                "by the renderer yet (supported: bilinear)", em.loc)

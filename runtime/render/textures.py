@@ -19,6 +19,7 @@ import numpy as np
 
 from ...compiler.diagnostics import CompileError
 from ...compiler.passes.specialize import Instance, TextureRef
+from .colors import spectrum_value
 
 # Mitsuba plugin -> rdsl file under stdlib/
 TEXTURE_PLUGINS = {"bitmap": "texture.bitmap", "checkerboard": "texture.checkerboard"}
@@ -115,7 +116,7 @@ class TextureTable:
                 if rgb is None:
                     raise CompileError(f"checkerboard.{c}: textures of textures are not "
                                        "supported by the renderer yet", plugin.loc)
-                params[c] = tuple(float(x) for x in rgb)
+                params[c] = spectrum_value(p[c], f"checkerboard.{c}", loc=plugin.loc)
         else:
             offset, w, h, mean = self._image(p["filename"], bool(p["raw"]), plugin)
             params.update(offset=offset, width=w, height=h, average=mean,

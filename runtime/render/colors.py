@@ -1,0 +1,58 @@
+"""Colours as the variant stores them: what the kernels read from the scene's buffers.
+
+A constant colour parameter reaches the compiler as a
+:class:`~rdsl.compiler.passes.specialize.SpectrumValue` (sRGB, the scene's tabulated
+spectrum if it gave one, and whether it is emitted light); the compiler upsamples it.  Colours
+the kernels read from buffers (emitter tables, bitmap texels) are stored already encoded:
+linear sRGB in the mono and rgb variants, Jakob & Hanika coefficients in the spectral one
+(see compiler/passes/lift.py).
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from ...compiler.diagnostics import CompileError
+from ...compiler.passes.specialize import SpectrumValue
+
+
+def spectrum_value(value: Any, what: str, illuminant: bool = False, loc: Any = None
+                   ) -> SpectrumValue | float:
+    """A scene colour (``Color`` or a number) as a parameter value.  A number stays a number
+    for reflectances (a flat spectrum), but is a grey light for an emitter."""
+    rgb = getattr(value, "rgb", None)
+    if rgb is None:
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            raise CompileError(f"{what}: a texture is not supported here (give an rgb or a "
+                               "spectrum)", loc)
+        if not illuminant:
+            return float(value)
+        rgb = (float(value),) * 3
+    wl = getattr(value, "wavelengths", None)
+    samples = None if wl is None else (tuple(map(float, wl)), tuple(map(float, value.values)))
+    return SpectrumValue(tuple(float(x) for x in rgb), samples, illuminant)
+
+
+def emission_row(rgb: np.ndarray, variant: str) -> tuple[np.ndarray, float]:
+    """An emitted colour as an emitter table stores it: 3 floats and a scale (the rdsl
+    ``illuminant(c0, c1, c2, scale)``)."""
+    rgb = np.asarray(rgb, np.float64)
+    if variant != "spectral":
+        return rgb, 1.0
+    from ..spectral import illuminant_from_rgb
+
+    coeffs, scale = illuminant_from_rgb(rgb)
+    return np.asarray(coeffs, np.float64), float(scale)
+
+
+def encode_texels(texels: np.ndarray, variant: str) -> np.ndarray:
+    """Reflectance texels (..., 3) as the variant stores them."""
+    if variant != "spectral":
+        return texels
+    from ..spectral import rgb_to_coeffs
+
+    shape = texels.shape
+    return np.asarray(rgb_to_coeffs(np.asarray(texels, np.float64).reshape(-1, 3)),
+                      np.float32).reshape(shape)
