@@ -652,17 +652,17 @@ def test_spectrum_parsing() -> None:
 
 def test_unit_spectrum_has_unit_luminance() -> None:
     xyz = spectra.spectrum_to_xyz(np.array([300.0, 900.0]), np.array([1.0, 1.0]))
-    assert xyz[1] == pytest.approx(1.0, rel=1e-9)
+    assert xyz[1] == pytest.approx(1.0, rel=2e-3)  # Mitsuba: 1.000999
     assert xyz[0] == pytest.approx(1.0, abs=0.02) and xyz[2] == pytest.approx(1.0, abs=0.02)
 
 
 def test_conductor_rgb_matches_mitsuba() -> None:
     from rdsl.compiler.ir import Loc
     eta, k = spectra.conductor_ior("Cu", Loc("x", 1, 1))
-    np.testing.assert_allclose(eta.rgb, (0.200438, 0.924033, 1.10221), rtol=0.03)
-    np.testing.assert_allclose(k.rgb, (3.91295, 2.45285, 2.14219), rtol=0.03)
+    np.testing.assert_allclose(eta.rgb, (0.200438, 0.924033, 1.10221), rtol=5e-3)
+    np.testing.assert_allclose(k.rgb, (3.91295, 2.45285, 2.14219), rtol=5e-3)
     eta, k = spectra.conductor_ior("Ag", Loc("x", 1, 1))  # Mitsuba 3: 0.1553 0.1167 0.1384
-    np.testing.assert_allclose(eta.rgb, (0.15528, 0.11673, 0.13839), rtol=0.03)
+    np.testing.assert_allclose(eta.rgb, (0.15528, 0.11673, 0.13839), rtol=5e-3)
 
 
 def test_spectrum_file(tmp_path: Path) -> None:

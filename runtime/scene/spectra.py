@@ -4,16 +4,9 @@ A :class:`Color` keeps what the scene said (RGB, or wavelength/value pairs) and 
 sRGB projection, so that the RGB variant reads ``color.rgb`` and a spectral variant can sample
 ``color.wavelengths`` / ``color.values``.
 
-Spectrum-to-RGB follows Mitsuba 3's ``spectrum_list_to_srgb``: 1000 evenly spaced samples over
-360..830 nm of the piecewise-linear spectrum against the CIE 1931 2° colour matching functions,
-scaled so that a unit spectrum has luminance Y = 1, then XYZ -> linear sRGB (D65).  The matching
-functions come from the multi-lobe Gaussian fit of
-
-    C. Wyman, P.-P. Sloan, P. Shirley, "Simple Analytic Approximations to the CIE XYZ Color
-    Matching Functions", Journal of Computer Graphics Techniques 2(2), 2013.
-
-which is within about 1 % of the tabulated curves, hence within a few percent of Mitsuba's
-values (Mitsuba integrates the 5 nm CIE table).
+Spectrum-to-RGB follows Mitsuba 3's ``spectrum_list_to_srgb`` with its tabulated CIE 1931
+curves (rdsl.runtime.spectral): 1000 evenly spaced samples over 360..830 nm of the
+piecewise-linear spectrum, reflectances seen under D65.
 """
 
 from __future__ import annotations
@@ -26,18 +19,11 @@ from pathlib import Path
 import numpy as np
 
 from ...compiler.ir import Loc
+from .. import spectral
 from .errors import scene_error
 
 CIE_MIN = 360.0
 CIE_MAX = 830.0
-_STEPS = 1000
-
-# XYZ -> linear sRGB (D65), the matrix Mitsuba 3 uses (color.h).
-XYZ_TO_SRGB = np.array([
-    [3.240479, -1.537150, -0.498535],
-    [-0.969256, 1.875991, 0.041556],
-    [0.055648, -0.204043, 1.057311],
-])
 
 IOR_DIR = Path(__file__).resolve().parents[2] / "stdlib" / "data" / "ior"
 
@@ -60,44 +46,20 @@ class Color:
         return self.wavelengths is None and self.rgb[0] == self.rgb[1] == self.rgb[2]
 
 
-def _lobe(lam: np.ndarray, mu: float, s1: float, s2: float) -> np.ndarray:
-    t = (lam - mu) / np.where(lam < mu, s1, s2)
-    return np.exp(-0.5 * t * t)
-
-
-def cie1931_xyz(lam: np.ndarray | float) -> np.ndarray:
-    """CIE 1931 2° matching functions (Wyman et al. 2013 multi-lobe fit), shape (..., 3)."""
-    lam = np.asarray(lam, dtype=np.float64)
-    x = (1.056 * _lobe(lam, 599.8, 37.9, 31.0) + 0.362 * _lobe(lam, 442.0, 16.0, 26.7)
-         - 0.065 * _lobe(lam, 501.1, 20.4, 26.2))
-    y = 0.821 * _lobe(lam, 568.8, 46.9, 40.5) + 0.286 * _lobe(lam, 530.9, 16.3, 31.1)
-    z = 1.217 * _lobe(lam, 437.0, 11.8, 36.0) + 0.681 * _lobe(lam, 459.0, 26.0, 13.8)
-    return np.stack([x, y, z], axis=-1)
-
-
-_GRID = CIE_MIN + np.arange(_STEPS) / (_STEPS - 1) * (CIE_MAX - CIE_MIN)
-_CMF = cie1931_xyz(_GRID)
-# Mitsuba divides by the integral of its ybar table (MI_CIE_Y_NORMALIZATION); we divide by
-# the integral of the fitted ybar on the same grid, so a unit spectrum gives Y = 1 exactly.
-_Y_INTEGRAL = float(_CMF[:, 1].sum() * (CIE_MAX - CIE_MIN) / _STEPS)
-
-
 def spectrum_to_xyz(wavelengths: np.ndarray, values: np.ndarray) -> np.ndarray:
-    """Integrate a piecewise-linear spectrum against the CIE curves (zero outside its range)."""
-    wl = np.asarray(wavelengths, dtype=np.float64)
-    v = np.asarray(values, dtype=np.float64)
-    inside = (_GRID >= wl[0]) & (_GRID <= wl[-1])
-    s = np.where(inside, np.interp(_GRID, wl, v), 0.0)
-    xyz = (_CMF * s[:, None]).sum(axis=0) * (CIE_MAX - CIE_MIN) / _STEPS
-    return xyz / _Y_INTEGRAL
+    """CIE XYZ of a piecewise-linear spectrum (zero outside its range), scaled so that a unit
+    spectrum has luminance Y ~ 1 (Mitsuba's normalisation)."""
+    return np.linalg.solve(spectral.XYZ_TO_SRGB, spectral.spectrum_to_rgb_emission(
+        np.asarray(wavelengths, np.float64), np.asarray(values, np.float64)))
 
 
 def spectrum_to_srgb(wavelengths, values, bounded: bool = True) -> tuple[float, float, float]:
-    """Mitsuba's ``spectrum_list_to_srgb``: negative channels clamp to 0, and to 1 if bounded."""
-    rgb = XYZ_TO_SRGB @ spectrum_to_xyz(wavelengths, values)
-    rgb = np.maximum(rgb, 0.0)
-    if bounded:
-        rgb = np.minimum(rgb, 1.0)
+    """What Mitsuba 3's rgb variants make of wavelength:value pairs: a reflectance
+    (``bounded``) is seen under D65 and clamped to [0, 1], anything else only clamped at 0
+    (rdsl.runtime.spectral, with the tabulated CIE 1931 curves)."""
+    wl, v = np.asarray(wavelengths, np.float64), np.asarray(values, np.float64)
+    rgb = (spectral.spectrum_to_rgb_reflectance(wl, v) if bounded
+           else spectral.spectrum_to_rgb_emission(wl, v))
     return (float(rgb[0]), float(rgb[1]), float(rgb[2]))
 
 
