@@ -182,7 +182,8 @@ def eval_coeffs(coeffs: np.ndarray, lam: np.ndarray | float) -> np.ndarray:
     """The sigmoid-polynomial spectrum ``sigmoid(c0 l^2 + c1 l + c2)`` at ``lam`` (nm).
 
     ``coeffs`` (..., 3) broadcasts against ``lam``'s leading dimensions plus one trailing
-    wavelength axis: coefficients (..., 3) with ``lam`` (..., n) give (..., n). As in
+    wavelength axis: coefficients (..., 3) with ``lam`` (..., n) give (..., n), with a scalar
+    ``lam`` they give (...). As in
     ``srgb_model_eval``, an infinite ``c2`` gives the constant 0 or 1. The sigmoid is taken
     without overflow so the result stays in [0, 1] for any finite coefficients; a polynomial
     that is NaN (only from infinite or NaN coefficients) evaluates to 0.5.
@@ -196,7 +197,8 @@ def eval_coeffs(coeffs: np.ndarray, lam: np.ndarray | float) -> np.ndarray:
     s = np.where(np.isinf(x), 0.5 + 0.5 * np.sign(x), s)
     s = np.where(np.isnan(s), 0.5, s)
     s = np.where(np.isinf(c2), 0.5 + 0.5 * np.sign(c2), s)
-    return np.clip(s, 0.0, 1.0)
+    s = np.clip(s, 0.0, 1.0)
+    return s[..., 0] if lam.ndim == 0 else s
 
 
 def illuminant_from_rgb(rgb: np.ndarray) -> tuple[np.ndarray, float | np.ndarray]:
