@@ -235,6 +235,8 @@ class Lift(Pass):
                 term = b.op(Op.MUL, F32, b.const(w, F32), v)
                 acc = term if acc is None else b.op(Op.ADD, F32, acc, term)
             return acc if len(ops) == 3 else b.op(Op.MUL, F32, acc, ops[3])
+        if ins.op is Op.SELECT and self.spectral is not None:
+            return self.spectral.select(b, ins, ops)
         if ins.op in (Op.MUL, Op.DIV) and isinstance(ins.type, MatType):
             raise self._fail(ins, "matrix spectra are not supported here")
         return None
@@ -264,6 +266,9 @@ class _Spectral:
         self.wavelengths: Value | None = None
         self.tables = Builder(Block(), loc)
         self._tables: dict[bytes, Value] = {}
+        # reflectances by their coefficients: a select between two picks coefficients and
+        # evaluates one sigmoid (a scene's per-instance colours are such selects)
+        self.coeffs: dict[Value, list[Value]] = {}
 
     def lam(self, ins: Instr) -> Value:
         if self.wavelengths is None:
@@ -314,6 +319,19 @@ class _Spectral:
     def sigmoid_poly(self, b: Builder, ins: Instr, c: list[Value]) -> Value:
         """Jakob & Hanika's model at the wavelengths: s(c0 l^2 + c1 l + c2), s(x) =
         1/2 + x / (2 sqrt(1 + x^2)); x is clamped so that x^2 stays finite."""
+        out = self._sigmoid_poly(b, ins, c)
+        self.coeffs[out] = list(c)
+        return out
+
+    def select(self, b: Builder, ins: Instr, ops: list[Value]) -> Value | None:
+        """``select(c, s(a), s(b))`` of two reflectances as ``s(select(c, a, b))``."""
+        a, c = self.coeffs.get(ops[1]), self.coeffs.get(ops[2])
+        if a is None or c is None:
+            return None
+        picked = [x if x is y else b.op(Op.SELECT, F32, ops[0], x, y) for x, y in zip(a, c)]
+        return self.sigmoid_poly(b, ins, picked)
+
+    def _sigmoid_poly(self, b: Builder, ins: Instr, c: list[Value]) -> Value:
         v4 = VecType(4)
         lam = self.lam(ins)
         cs = [b.op(Op.BROADCAST, v4, x) for x in c]
