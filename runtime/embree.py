@@ -339,28 +339,37 @@ class EmbreeScene:
                              f"got {quality!r}")
         if isinstance(meshes, tuple) and len(meshes) == 2 and isinstance(meshes[0], np.ndarray):
             meshes = [meshes]  # a single (vertices, faces) pair
-        checked = [_check_mesh(i, m) for i, m in enumerate(meshes)]
+        # an analytic shape (runtime/embree_user.py) is a user geometry, not a mesh
+        checked = [m if hasattr(m, "new_geometry") else _check_mesh(i, m)
+                   for i, m in enumerate(meshes)]
         self.device = device or default_device()
         self.lib = lib = self.device.lib
         self.handle: int | None = None
-        self.counts = [(len(v), len(f)) for v, f in checked]
+        self.user_shapes = [m for m in checked if hasattr(m, "new_geometry")]  # kept alive
+        self.counts = [(0, 0) if hasattr(m, "new_geometry") else (len(m[0]), len(m[1]))
+                       for m in checked]
         scene = lib.rtcNewScene(self.device.handle)
         self.device.check("rtcNewScene")
         self.handle = scene
         lib.rtcSetSceneBuildQuality(scene, BUILD_QUALITY[quality])
         lib.rtcSetSceneFlags(scene, SCENE_FLAGS["robust"] if robust else 0)
-        for i, (v, f) in enumerate(checked):
-            geom = lib.rtcNewGeometry(self.device.handle, _GEOMETRY_TYPE_TRIANGLE)
-            self.device.check(f"rtcNewGeometry (meshes[{i}])")
+        for i, item in enumerate(checked):
+            if hasattr(item, "new_geometry"):
+                geom = item.new_geometry(self.device, f"meshes[{i}]")
+            else:
+                geom = lib.rtcNewGeometry(self.device.handle, _GEOMETRY_TYPE_TRIANGLE)
+                self.device.check(f"rtcNewGeometry (meshes[{i}])")
             try:
-                vb = lib.rtcSetNewGeometryBuffer(geom, _BUFFER_TYPE_VERTEX, 0, _FORMAT_FLOAT3,
-                                                 12, len(v))
-                ib = lib.rtcSetNewGeometryBuffer(geom, _BUFFER_TYPE_INDEX, 0, _FORMAT_UINT3,
-                                                 12, len(f))
-                self.device.check(f"rtcSetNewGeometryBuffer (meshes[{i}])")
-                ctypes.memmove(vb, v.ctypes.data, v.nbytes)
-                ctypes.memmove(ib, f.ctypes.data, f.nbytes)
-                lib.rtcCommitGeometry(geom)
+                if not hasattr(item, "new_geometry"):
+                    v, f = item
+                    vb = lib.rtcSetNewGeometryBuffer(geom, _BUFFER_TYPE_VERTEX, 0,
+                                                     _FORMAT_FLOAT3, 12, len(v))
+                    ib = lib.rtcSetNewGeometryBuffer(geom, _BUFFER_TYPE_INDEX, 0,
+                                                     _FORMAT_UINT3, 12, len(f))
+                    self.device.check(f"rtcSetNewGeometryBuffer (meshes[{i}])")
+                    ctypes.memmove(vb, v.ctypes.data, v.nbytes)
+                    ctypes.memmove(ib, f.ctypes.data, f.nbytes)
+                    lib.rtcCommitGeometry(geom)
                 geom_id = lib.rtcAttachGeometry(scene, geom)
                 self.device.check(f"attaching meshes[{i}]")
                 assert geom_id == i, (geom_id, i)
