@@ -290,14 +290,6 @@ class _Builder:
             mesh = meshes.sphere()
         elif obj.type in ("rectangle", "cube", "disk"):
             mesh = getattr(meshes, obj.type)()
-        if obj.type in ("sphere", "disk") and not p["triangulate"]:
-            obj.analytic = Analytic(obj.type, m, bool(p["flip_normals"]))
-            problem = obj.analytic.uniform_scale_problem()
-            if problem:  # Mitsuba warns and keeps a sphere of radius |to_world (1, 0, 0)|
-                loc = _loc(node, "to_world")
-                warnings.warn(f"{loc.file}:{loc.line}: sphere: {problem} (the sphere keeps "
-                              f"radius {obj.analytic.radius:g}); set 'triangulate' to render "
-                              "the transformed mesh instead", stacklevel=2)
         else:
             path = self.file(node, "filename", "mesh")
             try:
@@ -315,6 +307,14 @@ class _Builder:
                                   f"'{p['filename']}': {e.strerror}",
                                   _loc(node, "filename")) from None
             p["filename"] = str(path)
+        if obj.type in ("sphere", "disk") and not p["triangulate"]:
+            obj.analytic = Analytic(obj.type, m, bool(p["flip_normals"]))
+            problem = obj.analytic.uniform_scale_problem()
+            if problem:  # Mitsuba warns and keeps a sphere of radius |to_world (1, 0, 0)|
+                loc = _loc(node, "to_world")
+                warnings.warn(f"{loc.file}:{loc.line}: sphere: {problem} (the sphere keeps "
+                              f"radius {obj.analytic.radius:g}); set 'triangulate' to render "
+                              "the transformed mesh instead", stacklevel=2)
         face_normals = bool(p.get("face_normals") or mesh.face_normals)
         p["to_world"] = m
         obj.mesh = meshes.to_world(mesh, m, p["flip_normals"], face_normals)
