@@ -354,22 +354,27 @@ class EmbreeScene:
         lib.rtcSetSceneBuildQuality(scene, BUILD_QUALITY[quality])
         lib.rtcSetSceneFlags(scene, SCENE_FLAGS["robust"] if robust else 0)
         for i, item in enumerate(checked):
-            if hasattr(item, "new_geometry"):
+            if hasattr(item, "new_geometry"):  # a user geometry, committed by its owner
                 geom = item.new_geometry(self.device, f"meshes[{i}]")
-            else:
-                geom = lib.rtcNewGeometry(self.device.handle, _GEOMETRY_TYPE_TRIANGLE)
-                self.device.check(f"rtcNewGeometry (meshes[{i}])")
+                try:
+                    geom_id = lib.rtcAttachGeometry(scene, geom)
+                    self.device.check(f"attaching meshes[{i}]")
+                    assert geom_id == i, (geom_id, i)
+                finally:
+                    lib.rtcReleaseGeometry(geom)
+                continue
+            v, f = item
+            geom = lib.rtcNewGeometry(self.device.handle, _GEOMETRY_TYPE_TRIANGLE)
+            self.device.check(f"rtcNewGeometry (meshes[{i}])")
             try:
-                if not hasattr(item, "new_geometry"):
-                    v, f = item
-                    vb = lib.rtcSetNewGeometryBuffer(geom, _BUFFER_TYPE_VERTEX, 0,
-                                                     _FORMAT_FLOAT3, 12, len(v))
-                    ib = lib.rtcSetNewGeometryBuffer(geom, _BUFFER_TYPE_INDEX, 0,
-                                                     _FORMAT_UINT3, 12, len(f))
-                    self.device.check(f"rtcSetNewGeometryBuffer (meshes[{i}])")
-                    ctypes.memmove(vb, v.ctypes.data, v.nbytes)
-                    ctypes.memmove(ib, f.ctypes.data, f.nbytes)
-                    lib.rtcCommitGeometry(geom)
+                vb = lib.rtcSetNewGeometryBuffer(geom, _BUFFER_TYPE_VERTEX, 0, _FORMAT_FLOAT3,
+                                                 12, len(v))
+                ib = lib.rtcSetNewGeometryBuffer(geom, _BUFFER_TYPE_INDEX, 0, _FORMAT_UINT3,
+                                                 12, len(f))
+                self.device.check(f"rtcSetNewGeometryBuffer (meshes[{i}])")
+                ctypes.memmove(vb, v.ctypes.data, v.nbytes)
+                ctypes.memmove(ib, f.ctypes.data, f.nbytes)
+                lib.rtcCommitGeometry(geom)
                 geom_id = lib.rtcAttachGeometry(scene, geom)
                 self.device.check(f"attaching meshes[{i}]")
                 assert geom_id == i, (geom_id, i)
