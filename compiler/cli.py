@@ -57,6 +57,8 @@ def _parser() -> argparse.ArgumentParser:
                    help="print what specialization did and the kernel sizes")
     r.add_argument("--no-specialize", dest="specialize", action="store_false",
                    help="the generic build: parameters read at run time, every emitter kind")
+    r.add_argument("--triangulate", action="store_true",
+                   help="render spheres and disks as triangle meshes, not analytic shapes")
     r.add_argument("--quiet", action="store_true", help="no progress bar")
     return p
 

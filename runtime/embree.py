@@ -339,17 +339,31 @@ class EmbreeScene:
                              f"got {quality!r}")
         if isinstance(meshes, tuple) and len(meshes) == 2 and isinstance(meshes[0], np.ndarray):
             meshes = [meshes]  # a single (vertices, faces) pair
-        checked = [_check_mesh(i, m) for i, m in enumerate(meshes)]
+        # an analytic shape (runtime/embree_user.py) is a user geometry, not a mesh
+        checked = [m if hasattr(m, "new_geometry") else _check_mesh(i, m)
+                   for i, m in enumerate(meshes)]
         self.device = device or default_device()
         self.lib = lib = self.device.lib
         self.handle: int | None = None
-        self.counts = [(len(v), len(f)) for v, f in checked]
+        self.user_shapes = [m for m in checked if hasattr(m, "new_geometry")]  # kept alive
+        self.counts = [(0, 0) if hasattr(m, "new_geometry") else (len(m[0]), len(m[1]))
+                       for m in checked]
         scene = lib.rtcNewScene(self.device.handle)
         self.device.check("rtcNewScene")
         self.handle = scene
         lib.rtcSetSceneBuildQuality(scene, BUILD_QUALITY[quality])
         lib.rtcSetSceneFlags(scene, SCENE_FLAGS["robust"] if robust else 0)
-        for i, (v, f) in enumerate(checked):
+        for i, item in enumerate(checked):
+            if hasattr(item, "new_geometry"):  # a user geometry, committed by its owner
+                geom = item.new_geometry(self.device, f"meshes[{i}]")
+                try:
+                    geom_id = lib.rtcAttachGeometry(scene, geom)
+                    self.device.check(f"attaching meshes[{i}]")
+                    assert geom_id == i, (geom_id, i)
+                finally:
+                    lib.rtcReleaseGeometry(geom)
+                continue
+            v, f = item
             geom = lib.rtcNewGeometry(self.device.handle, _GEOMETRY_TYPE_TRIANGLE)
             self.device.check(f"rtcNewGeometry (meshes[{i}])")
             try:

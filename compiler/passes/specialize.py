@@ -73,6 +73,7 @@ PLACEHOLDERS = {
 }
 TEXTURE_PLACEHOLDER = "scene_texture_eval"
 EMITTER_KIND_PLACEHOLDER = "scene_has_emitter_kind"  # folded to the scene's emitter kinds
+SHAPE_KIND_PLACEHOLDER = "scene_has_shape_kind"  # folded to the scene's shape kinds
 PARAM_BUFFER = "PRM"  # the generic build's parameter buffer
 
 
@@ -129,6 +130,8 @@ class SceneSpec:
     bsdf_leaves: list[Instance] = field(default_factory=list)  # nested in combinators
     # the kinds of emitter the scene has (lights.rdsl's EK kinds); None: any kind may occur
     emitter_kinds: tuple[int, ...] | None = None
+    # the kinds of shape (geometry.rdsl: 0 mesh, 1 sphere, 2 disk); None: any kind may occur
+    shape_kinds: tuple[int, ...] | None = None
 
 
 def parameter_slots(scene: SceneSpec, variant: str = "rgb") -> tuple[SceneSpec, np.ndarray]:
@@ -172,7 +175,7 @@ def parameter_slots(scene: SceneSpec, variant: str = "rgb") -> tuple[SceneSpec, 
                                     for k, v in i.params.items()}, i.name, list(i.children))
                 for i in getattr(scene, kind)]
 
-    # emitter_kinds stays None: the generic build samples every kind of emitter
+    # emitter_kinds and shape_kinds stay None: the generic build handles every kind
     spec = SceneSpec(instances("bsdfs"), instances("emitters"), instances("textures"),
                      instances("bsdf_leaves"))
     return spec, np.asarray(values, np.float32)
@@ -207,9 +210,11 @@ class Specialize(Pass):
             if placeholder is None:
                 continue
             self._dispatch(module, placeholder, getattr(self.scene, kind), method)
-        kinds = module.functions.get(EMITTER_KIND_PLACEHOLDER)
-        if kinds is not None and self.scene.emitter_kinds is not None:
-            kinds.body = _kind_test(kinds, self.scene.emitter_kinds)
+        for name, present in ((EMITTER_KIND_PLACEHOLDER, self.scene.emitter_kinds),
+                              (SHAPE_KIND_PLACEHOLDER, self.scene.shape_kinds)):
+            kinds = module.functions.get(name)
+            if kinds is not None and present is not None:
+                kinds.body = _kind_test(kinds, present)
         if self._prm:
             for name, prm in self._prm.items():
                 module.functions[name].params.append(Param(prm, uniform=True))

@@ -31,7 +31,8 @@ def render_command(args: Any) -> int:
 
     t0 = time.perf_counter()
     scene = load_scene(scene_path, variant=args.variant, target=args.target,
-                       specialize=getattr(args, "specialize", True), **defines)
+                       specialize=getattr(args, "specialize", True),
+                       triangulate=getattr(args, "triangulate", False), **defines)
     t_load = time.perf_counter() - t0
     if not scene.buffers.nlight:
         print(f"{scene_path}: warning: the scene has no emitters; the image will be black",

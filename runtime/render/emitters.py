@@ -59,9 +59,14 @@ def _linear_part(m: np.ndarray, what: str, loc: Any, rigid: bool) -> np.ndarray:
 
 
 def emitter_tables(desc: Any, lights: list[tuple[int, int, float]],
-                   area_emitters: int, variant: str = "rgb") -> EmitterTables:
+                   area_emitters: int,
+                   analytic: dict[int, tuple[int, int, float]] | None = None,
+                   variant: str = "rgb") -> EmitterTables:
     """Tables for the scene's emitters.  ``lights`` holds (triangle, shape, area) for every
-    triangle of the area-lit shapes, in shape order; ``area_emitters`` counts those shapes."""
+    triangle of the area-lit shapes, in shape order; ``area_emitters`` counts those shapes.
+    An area-lit analytic shape is a single entry (-1, shape, area) of ``lights``, and
+    ``analytic[shape]`` = (shape kind, offset of its record in P, area): its EK row is (area,
+    offset, 0, kind), and lights.rdsl samples its surface instead of triangles."""
     LC, LT, EK, E = [], [], [], []
     # area emitters: one run of consecutive entries per shape
     start = 0
@@ -70,13 +75,19 @@ def emitter_tables(desc: Any, lights: list[tuple[int, int, float]],
         end = start
         while end < len(lights) and lights[end][1] == shape:
             end += 1
-        areas = np.array([a for _, _, a in lights[start:end]], np.float64)
-        cum = np.cumsum(areas)
-        LC += list(cum)
-        LT += [(t, s) for t, s, _ in lights[start:end]]
-        EK.append((KINDS["area"], start, end - start, 0))
         row = np.zeros(STRIDE)
-        row[0] = np.float32(cum[-1])
+        if analytic and shape in analytic:
+            kind, offset, area = analytic[shape]
+            EK.append((KINDS["area"], offset, 0, kind))
+            row[0] = np.float32(area)
+        else:
+            areas = np.array([a for _, _, a in lights[start:end]], np.float64)
+            cum = np.cumsum(areas)
+            first = len(LC)
+            LC += list(cum)
+            LT += [(t, s) for t, s, _ in lights[start:end]]
+            EK.append((KINDS["area"], first, end - start, 0))
+            row[0] = np.float32(cum[-1])
         E.append(row)
         start = end
     assert len(EK) == area_emitters, (len(EK), area_emitters)

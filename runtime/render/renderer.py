@@ -34,6 +34,9 @@ from .emitters import EmitterTables, emitter_tables
 from .film import develop, film_reach, film_uniforms, new_accumulator
 from .integrators import AOV_TYPES, IntegratorPlan, direct_samples, integrator_plan
 from .progress import Progress
+from .shapes import FLAGS as SHAPE_FLAGS
+from .shapes import KINDS as SHAPE_KINDS
+from .shapes import RECORD, shape_record, user_geometry
 from .textures import TEXTURE_PLUGINS, TextureTable
 
 EMITTER_PLUGINS = {"area": "emitter.area"}
@@ -66,9 +69,11 @@ class SceneBuffers:
                 self.T, *self.lights.args()]
 
 
-def flatten(desc: Any, variant: str = "rgb"
+def flatten(desc: Any, triangulate: bool = False, variant: str = "rgb"
             ) -> tuple[SceneBuffers, list[Instance], list[Instance]]:
-    """Concatenate the scene's meshes and collect its BSDF and emitter instances; colours in
+    """Concatenate the scene's meshes and collect its BSDF and emitter instances.  Analytic
+    spheres and disks become Embree user geometry with a record in ``P`` (after the
+    vertices), unless ``triangulate`` asks for every shape's triangle mesh.  Colours in
     buffers are stored as ``variant`` reads them (runtime/render/colors.py)."""
     P, N, UV, F, G = [], [], [], [], []
     bsdfs: list[Instance] = []
@@ -76,9 +81,27 @@ def flatten(desc: Any, variant: str = "rgb"
     textures = TextureTable()
     emitters: list[Instance] = []
     lights: list[tuple[int, int, float]] = []  # (triangle, shape, area)
+    records: list[tuple[int, Any]] = []  # (shape, Analytic) of the analytic shapes
     nv = nt = 0
-    meshes = []
+    meshes: list[Any] = []
     for shape_index, shape in enumerate(desc.shapes):
+        key = id(shape.bsdf)
+        if key not in bsdf_ids:
+            bsdf_ids[key] = len(bsdfs)
+            bsdfs.append(bsdf_instance(shape.bsdf, textures))
+        emitter = -1
+        if shape.emitter is not None:
+            emitter = len(emitters)
+            emitters.append(_area_instance(shape.emitter))
+        analytic = None if triangulate else shape.analytic
+        if analytic is not None:  # G's first entry is set below, with the records
+            meshes.append(user_geometry(analytic))
+            records.append((shape_index, analytic))
+            if emitter >= 0:
+                lights.append((-1, shape_index, analytic.area))
+            G.append(np.array([-1, bsdf_ids[key], emitter, SHAPE_FLAGS[analytic.kind]],
+                              np.int32))
+            continue
         m = shape.mesh
         v = np.ascontiguousarray(m.vertices, np.float32)
         f = np.ascontiguousarray(m.faces, np.uint32)
@@ -96,19 +119,7 @@ def flatten(desc: Any, variant: str = "rgb"
         else:
             UV.append(np.zeros(2 * len(v), np.float32))
         F.append((f.astype(np.int64) + nv).astype(np.int32).reshape(-1))
-        key = id(shape.bsdf)
-        if key not in bsdf_ids:
-            bsdf_ids[key] = len(bsdfs)
-            bsdfs.append(bsdf_instance(shape.bsdf, textures))
-        emitter = -1
-        if shape.emitter is not None:
-            em = shape.emitter
-            if em.type not in EMITTER_PLUGINS:
-                raise CompileError(f"emitter `{em.type}` is not supported by the renderer yet",
-                                   em.loc)
-            emitter = len(emitters)
-            emitters.append(Instance(em.type, {"radiance": spectrum_value(
-                em.params["radiance"], "area.radiance", illuminant=True, loc=em.loc)}))
+        if emitter >= 0:
             tri = v[f]
             areas = 0.5 * np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]),
                                          axis=1)
@@ -116,13 +127,36 @@ def flatten(desc: Any, variant: str = "rgb"
         G.append(np.array([nt, bsdf_ids[key], emitter, flags], np.int32))
         nv += len(v)
         nt += len(f)
-    cat = (lambda xs, dt: np.ascontiguousarray(np.concatenate(xs) if xs else np.zeros(0, dt),
-                                               dt))
+    # the analytic shapes' records follow the vertices in P; G's first entry points at them
+    analytic_lights = {}
+    for j, (shape_index, analytic) in enumerate(records):
+        offset = 3 * nv + RECORD * j
+        G[shape_index][0] = offset
+        P.append(shape_record(analytic))
+        analytic_lights[shape_index] = (SHAPE_KINDS[analytic.kind], offset, analytic.area)
+
+    def cat(xs: list[np.ndarray], dt: Any) -> np.ndarray:  # never empty: kernels need memory
+        return np.ascontiguousarray(np.concatenate(xs) if xs else np.zeros(1, dt), dt)
+
     bufs = SceneBuffers(cat(P, np.float32), cat(N, np.float32), cat(UV, np.float32),
                         cat(F, np.int32), cat(G, np.int32),
-                        emitter_tables(desc, lights, len(emitters), variant), meshes)
+                        emitter_tables(desc, lights, len(emitters), analytic_lights, variant),
+                        meshes)
     bufs.T, bufs.textures = encode_texels(textures.buffer(), variant), textures.instances
     return bufs, bsdfs, emitters
+
+
+def _shape_kind(flags: int) -> int:
+    """geometry.rdsl's shape kind (0 mesh, 1 sphere, 2 disk) from G's flags."""
+    return next((SHAPE_KINDS[k] for k, bit in SHAPE_FLAGS.items() if flags & bit), 0)
+
+
+def _area_instance(em: Any) -> Instance:
+    """The ``area`` emitter instance of an emissive shape."""
+    if em.type not in EMITTER_PLUGINS:
+        raise CompileError(f"emitter `{em.type}` is not supported by the renderer yet", em.loc)
+    return Instance(em.type, {"radiance": spectrum_value(
+        em.params["radiance"], "area.radiance", illuminant=True, loc=em.loc)})
 
 
 def _literal(value: Any, struct: str | None = None) -> str:
@@ -249,7 +283,8 @@ class Scene:
     as a float32 (H, W, C) array."""
 
     def __init__(self, path: str | Path, variant: str = "rgb", target: str = "host",
-                 specialize: bool = True, **defaults: Any) -> None:
+                 specialize: bool = True, triangulate: bool = False,
+                 **defaults: Any) -> None:
         from ..embree import EmbreeScene
 
         self.path = Path(path)
@@ -258,7 +293,7 @@ class Scene:
         self.desc = load_scene_description(self.path, **defaults)
         self.spp = int(self.desc.sensor.sampler.params.get("sample_count", 4))
         self.seed = int(self.desc.sensor.sampler.params.get("seed", 0))
-        self.buffers, self.bsdfs, self.emitters = flatten(self.desc, variant)
+        self.buffers, self.bsdfs, self.emitters = flatten(self.desc, triangulate, variant)
         self.load_seconds = time.perf_counter() - t0
         self.embree = EmbreeScene(self.buffers.meshes)
         self.target = target
@@ -280,7 +315,8 @@ class Scene:
                             1 if self.variant == "mono" else 3, self.variant)
         bsdfs, leaves = split_leaves(self.bsdfs)  # combinators reach leaves by id
         kinds = tuple(sorted({int(k) for k in self.buffers.lights.EK[0::4]}))
-        scene = SceneSpec(bsdfs, self.emitters, self.buffers.textures, leaves, kinds)
+        shapes = tuple(sorted({_shape_kind(int(g)) for g in self.buffers.G[3::4]}))
+        scene = SceneSpec(bsdfs, self.emitters, self.buffers.textures, leaves, kinds, shapes)
         # the report is derived from the scene, so a cache hit can print it too
         self.report = describe(scene) + self._folding(scene)
         self.kernel_src, self.scene_spec = src, scene
@@ -387,7 +423,8 @@ def _film_samples(out: dict[str, Any], ns: int) -> np.ndarray:
 
 
 def load_scene(path: str | Path, variant: str = "rgb", target: str = "host",
-               specialize: bool = True, **defaults: Any) -> Scene:
+               specialize: bool = True, triangulate: bool = False, **defaults: Any) -> Scene:
     """Load a Mitsuba 3 XML scene for rendering (``-D name=value`` as keyword args).
     ``specialize=False`` gives the generic build (parameters read at run time)."""
-    return Scene(path, variant=variant, target=target, specialize=specialize, **defaults)
+    return Scene(path, variant=variant, target=target, specialize=specialize,
+                 triangulate=triangulate, **defaults)

@@ -22,6 +22,7 @@ import numpy as np
 from ...compiler.ir import Loc
 from . import meshes
 from . import transform as xf
+from .analytic import Analytic
 from .errors import scene_error
 from .meshes import Mesh, MeshError
 from .schema import (
@@ -72,6 +73,8 @@ class Shape(Plugin):
     """A shape with its world-space triangle mesh, its BSDF and its area emitter if any."""
 
     mesh: Mesh | None = None
+    # a sphere or disk, intersected and shaded exactly (None: render the mesh)
+    analytic: Analytic | None = None
     bsdf: Plugin | None = None
     emitter: Plugin | None = None
 
@@ -304,6 +307,14 @@ class _Builder:
                                   f"'{p['filename']}': {e.strerror}",
                                   _loc(node, "filename")) from None
             p["filename"] = str(path)
+        if obj.type in ("sphere", "disk") and not p["triangulate"]:
+            obj.analytic = Analytic(obj.type, m, bool(p["flip_normals"]))
+            problem = obj.analytic.uniform_scale_problem()
+            if problem:  # Mitsuba warns and keeps a sphere of radius |to_world (1, 0, 0)|
+                loc = _loc(node, "to_world")
+                warnings.warn(f"{loc.file}:{loc.line}: sphere: {problem} (the sphere keeps "
+                              f"radius {obj.analytic.radius:g}); set 'triangulate' to render "
+                              "the transformed mesh instead", stacklevel=2)
         face_normals = bool(p.get("face_normals") or mesh.face_normals)
         p["to_world"] = m
         obj.mesh = meshes.to_world(mesh, m, p["flip_normals"], face_normals)

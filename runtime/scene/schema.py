@@ -91,9 +91,11 @@ _SPECS = [
     # shapes
     PluginSpec("shape", "rectangle", dict(_SHAPE), _SHAPE_CHILDREN),
     PluginSpec("shape", "cube", dict(_MESH), _SHAPE_CHILDREN),
-    PluginSpec("shape", "disk", dict(_SHAPE), _SHAPE_CHILDREN),
-    PluginSpec("shape", "sphere", {**_SHAPE, "center": P("point"), "radius": P("float", 1.0)},
+    # `triangulate` (an rdsl extension): render the triangle mesh, not the analytic shape
+    PluginSpec("shape", "disk", {**_SHAPE, "triangulate": P("boolean", False)},
                _SHAPE_CHILDREN),
+    PluginSpec("shape", "sphere", {**_SHAPE, "center": P("point"), "radius": P("float", 1.0),
+                                   "triangulate": P("boolean", False)}, _SHAPE_CHILDREN),
     PluginSpec("shape", "obj", {**_MESH, "filename": P("string", REQUIRED),
                                 "flip_tex_coords": P("boolean", True)}, _SHAPE_CHILDREN),
     PluginSpec("shape", "ply", {**_MESH, "filename": P("string", REQUIRED),
