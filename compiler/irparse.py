@@ -27,6 +27,7 @@ from .ir import (
     Param,
     ScalarType,
     SpectrumType,
+    UnpolarizedType,
     StructType,
     TupleType,
     Type,
@@ -191,6 +192,8 @@ class _Parser:
             return MatType(int(name[3:]))
         if name == "spectrum":
             return SpectrumType()
+        if name == "unpolarized":
+            return UnpolarizedType()
         if name == "buffer":
             self.expect("<")
             elem = self._scalar_type()
