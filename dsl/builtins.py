@@ -39,7 +39,7 @@ BUILTIN_FNS = {
     "sqrt", "floor", "ceil", "abs", "min", "max", "select", "bits", "from_bits", "Float", "Int",
     "UInt", "UInt64", "Bool", "Vec2", "Vec3", "Vec4", "Mat3", "Mat4", "Spectrum", "mean",
     "max_value", "trace", "occluded", "illuminant", "set_wavelengths", "wavelengths", "to_srgb",
-    "unpolarized", "depolarizer", "mueller", "mueller_entry",
+    "Unpolarized", "unpolarized", "depolarizer", "mueller", "mueller_entry",
 }
 
 
@@ -143,6 +143,10 @@ def check_builtin(e: A.Call, name: str, args: list[A.Expr], types: list[Type | N
         for i in range(len(args)):
             arg(i, F32)
         return finish(SPECTRUM)
+    if name == "Unpolarized":
+        nargs(1)
+        arg(0, F32)
+        return finish(UNPOLARIZED)
     if name == "unpolarized":
         nargs(1)
         arg(0, SPECTRUM)

@@ -530,6 +530,8 @@ class _FnLowerer:
             return self.op(loc, Op.MAKE, t, *comps)
         if name == "Spectrum" and len(args) == 1 and isinstance(args[0].type, ir.UnpolarizedType):
             return self.op(loc, Op.SPEC_FROM, t, args[0])
+        if name == "Unpolarized":
+            return self.op(loc, Op.BROADCAST, t, args[0])
         if name == "unpolarized":
             return self.op(loc, Op.SPEC_UNPOL, t, args[0])
         if name == "depolarizer":
