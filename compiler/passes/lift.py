@@ -374,7 +374,7 @@ class _Mueller:
     def rewrite(self, lift: Lift, ins: Instr, b: Builder, ops: list[Value]) -> Value | None:
         """Return the replacement of ``ins``'s result, or None to keep it."""
         base = self.base
-        res_m = bool(ins.results) and self.is_mueller(ins.result)
+        res_m = len(ins.results) == 1 and self.is_mueller(ins.result)
         op = ins.op
         if op is Op.BROADCAST and res_m:
             return self.from_scalar(b, self.splat(b, ops[0]))
