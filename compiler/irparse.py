@@ -27,10 +27,10 @@ from .ir import (
     Param,
     ScalarType,
     SpectrumType,
-    UnpolarizedType,
     StructType,
     TupleType,
     Type,
+    UnpolarizedType,
     Value,
     VecType,
 )

@@ -5,11 +5,10 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-
 import rdsl
 from rdsl.compiler.diagnostics import CompileError
 from rdsl.compiler.driver import frontend, pipeline, run_passes
-from rdsl.compiler.ir import SpectrumType, VecType, F32
+from rdsl.compiler.ir import F32, SpectrumType, VecType
 
 SRC = """
 fn tint(x: Float) -> Spectrum {

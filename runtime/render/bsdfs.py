@@ -25,8 +25,8 @@ from typing import Any
 
 from ...compiler.diagnostics import CompileError
 from ...compiler.passes.specialize import Instance
-from .colors import spectrum_value
 from ..scene.schema import spec_for
+from .colors import spectrum_value
 
 STDLIB = Path(__file__).resolve().parents[2] / "stdlib"
 # Mitsuba plugin -> rdsl file under stdlib/
