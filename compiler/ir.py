@@ -154,6 +154,20 @@ class SpectrumType(Type):
 
 
 @dataclass(frozen=True)
+class UnpolarizedType(SpectrumType):
+    """The abstract ``Unpolarized`` spectrum: what ``Spectrum`` is without polarization (one
+    value per wavelength; Mitsuba's ``UnpolarizedSpectrum``).  In unpolarized variants it
+    lifts to the same type as ``Spectrum``; in polarized ones to one entry of a Mueller
+    matrix."""
+
+    def with_lanes(self, lanes: int) -> UnpolarizedType:
+        return UnpolarizedType(lanes=lanes)
+
+    def __str__(self) -> str:
+        return "unpolarized"
+
+
+@dataclass(frozen=True)
 class StructType(Type):
     """A named struct.  ``fields`` is a tuple of (name, type) pairs."""
 
@@ -214,6 +228,7 @@ U64 = ScalarType("u64")
 BOOL = ScalarType("bool")
 VEC2, VEC3, VEC4 = VecType(2), VecType(3), VecType(4)
 SPECTRUM = SpectrumType()
+UNPOLARIZED = UnpolarizedType()
 
 
 def components(t: Type) -> list[Type]:
@@ -292,6 +307,12 @@ class Op(enum.Enum):
     SPEC_SET = "spec.set_wavelengths"  # spectrum: this sample's wavelengths (nm), no result
     SPEC_LAMBDA = "spec.wavelengths"  # -> spectrum: this sample's wavelengths (nm)
     SPEC_SRGB = "spec.to_srgb"  # spectrum -> vec3 linear sRGB
+    # polarization (spectrum = a Mueller matrix in polarized variants; see passes/lift.py)
+    SPEC_UNPOL = "spec.unpolarized"  # spectrum -> unpolarized: entry [0][0]
+    SPEC_FROM = "spec.from_unpolarized"  # unpolarized u -> spectrum u * identity
+    SPEC_DEPOL = "spec.depolarizer"  # unpolarized u -> spectrum with only [0][0] = u
+    SPEC_MUELLER = "spec.mueller"  # 16 unpolarized entries (row-major) -> spectrum
+    SPEC_ENTRY = "spec.entry"  # spectrum -> unpolarized entry; attrs: row, col
     # constant data
     TABLE = "table"  # attrs: values (floats) -> buffer<f32> (read-only)
     # memory
@@ -527,6 +548,8 @@ def type_to_json(t: Type) -> dict[str, Any]:
         return {"kind": "tuple", "elems": [type_to_json(e) for e in t.elems]}
     if isinstance(t, BufferType):
         return {"kind": "buffer", "dtype": t.elem.name}
+    if isinstance(t, UnpolarizedType):
+        return {"kind": "unpolarized"}
     if isinstance(t, SpectrumType):
         return {"kind": "spectrum"}
     raise TypeError(t)

@@ -30,6 +30,7 @@ from .ir import (
     StructType,
     TupleType,
     Type,
+    UnpolarizedType,
     Value,
     VecType,
 )
@@ -191,6 +192,8 @@ class _Parser:
             return MatType(int(name[3:]))
         if name == "spectrum":
             return SpectrumType()
+        if name == "unpolarized":
+            return UnpolarizedType()
         if name == "buffer":
             self.expect("<")
             elem = self._scalar_type()

@@ -12,6 +12,7 @@ from ..compiler.ir import (
     I32,
     SPECTRUM,
     U32,
+    UNPOLARIZED,
     BufferType,
     MatType,
     ScalarType,
@@ -38,6 +39,7 @@ BUILTIN_FNS = {
     "sqrt", "floor", "ceil", "abs", "min", "max", "select", "bits", "from_bits", "Float", "Int",
     "UInt", "UInt64", "Bool", "Vec2", "Vec3", "Vec4", "Mat3", "Mat4", "Spectrum", "mean",
     "max_value", "trace", "occluded", "illuminant", "set_wavelengths", "wavelengths", "to_srgb",
+    "Unpolarized", "unpolarized", "depolarizer", "mueller", "mueller_entry",
 }
 
 
@@ -134,11 +136,39 @@ def check_builtin(e: A.Call, name: str, args: list[A.Expr], types: list[Type | N
         if total != n:
             raise err(f"`{name}` needs {n} components, found {total}", loc)
         return finish(want)
+    if name == "Spectrum" and len(args) == 1 and types[0] == UNPOLARIZED:
+        return finish(SPECTRUM)  # u times the identity (u itself when unpolarized)
     if name in ("Spectrum", "illuminant"):
         nargs(*((1, 3, 4) if name == "Spectrum" else (3, 4)))
         for i in range(len(args)):
             arg(i, F32)
         return finish(SPECTRUM)
+    if name == "Unpolarized":
+        nargs(1)
+        arg(0, F32)
+        return finish(UNPOLARIZED)
+    if name == "unpolarized":
+        nargs(1)
+        arg(0, SPECTRUM)
+        return finish(UNPOLARIZED)
+    if name == "depolarizer":
+        nargs(1)
+        arg(0, UNPOLARIZED)
+        return finish(SPECTRUM)
+    if name == "mueller":
+        nargs(16)
+        for i in range(16):
+            arg(i, UNPOLARIZED)
+        return finish(SPECTRUM)
+    if name == "mueller_entry":
+        nargs(3)
+        arg(0, SPECTRUM)
+        for i in (1, 2):
+            a = args[i]
+            if not (isinstance(a, A.IntLit) and a.suffix == "" and 0 <= a.value <= 3):
+                raise err(f"argument {i + 1} of `mueller_entry`: expected an integer literal "
+                          "0..3", a.loc)
+        return finish(UNPOLARIZED)
     if name == "set_wavelengths":
         nargs(1)
         arg(0, SPECTRUM)
@@ -152,7 +182,8 @@ def check_builtin(e: A.Call, name: str, args: list[A.Expr], types: list[Type | N
         return finish(VecType(3))
     if name in ("mean", "max_value"):
         nargs(1)
-        arg(0, SPECTRUM)
+        if types[0] != UNPOLARIZED:
+            arg(0, SPECTRUM)
         return finish(F32)
     if name == "trace":
         nargs(1)

@@ -528,6 +528,19 @@ class _FnLowerer:
                 else:
                     comps.append(a)
             return self.op(loc, Op.MAKE, t, *comps)
+        if name == "Spectrum" and len(args) == 1 and isinstance(args[0].type, ir.UnpolarizedType):
+            return self.op(loc, Op.SPEC_FROM, t, args[0])
+        if name == "Unpolarized":
+            return self.op(loc, Op.BROADCAST, t, args[0])
+        if name == "unpolarized":
+            return self.op(loc, Op.SPEC_UNPOL, t, args[0])
+        if name == "depolarizer":
+            return self.op(loc, Op.SPEC_DEPOL, t, args[0])
+        if name == "mueller":
+            return self.op(loc, Op.SPEC_MUELLER, t, *args)
+        if name == "mueller_entry":
+            row, col = (int(a.value) for a in e.args[1:])  # type: ignore[attr-defined]
+            return self.op(loc, Op.SPEC_ENTRY, t, args[0], row=row, col=col)
         if name == "Spectrum":
             if len(args) == 1:
                 return self.op(loc, Op.BROADCAST, t, args[0])

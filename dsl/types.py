@@ -23,6 +23,7 @@ from ..compiler.ir import (
     SPECTRUM,
     U32,
     U64,
+    UNPOLARIZED,
     BufferType,
     Loc,
     MatType,
@@ -31,6 +32,7 @@ from ..compiler.ir import (
     StructType,
     TupleType,
     Type,
+    UnpolarizedType,
     VecType,
 )
 from . import ast as A
@@ -52,7 +54,7 @@ TEXTURE = TextureType()
 BUILTIN_TYPES: dict[str, Type] = {
     "Float": F32, "Int": I32, "UInt": U32, "UInt64": U64, "Bool": BOOL,
     "Vec2": VecType(2), "Vec3": VecType(3), "Vec4": VecType(4), "Mat3": MatType(3),
-    "Mat4": MatType(4), "Spectrum": SPECTRUM, "Texture": TEXTURE,
+    "Mat4": MatType(4), "Spectrum": SPECTRUM, "Unpolarized": UNPOLARIZED, "Texture": TEXTURE,
 }
 _SCALAR_NAMES = {"f32": "Float", "i32": "Int", "u32": "UInt", "u64": "UInt64", "bool": "Bool"}
 
@@ -67,6 +69,8 @@ def type_name(t: Type | None) -> str:
         return f"Vec{t.n}"
     if isinstance(t, MatType):
         return f"Mat{t.n}"
+    if isinstance(t, UnpolarizedType):
+        return "Unpolarized"
     if isinstance(t, SpectrumType):
         return "Spectrum"
     if isinstance(t, TextureType):
@@ -126,6 +130,8 @@ def mangle(t: Type) -> str:
         return f"vec{t.n}"
     if isinstance(t, MatType):
         return f"mat{t.n}"
+    if isinstance(t, UnpolarizedType):
+        return "unpolarized"
     if isinstance(t, SpectrumType):
         return "spectrum"
     if isinstance(t, StructType):

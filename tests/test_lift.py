@@ -5,11 +5,10 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-
 import rdsl
 from rdsl.compiler.diagnostics import CompileError
 from rdsl.compiler.driver import frontend, pipeline, run_passes
-from rdsl.compiler.ir import SpectrumType, VecType, F32
+from rdsl.compiler.ir import F32, SpectrumType, VecType
 
 SRC = """
 fn tint(x: Float) -> Spectrum {
@@ -55,8 +54,16 @@ def test_no_spectrum_type_survives(variant, concrete):
         assert not ins.op.value.startswith("spec.")
 
 
-def test_unknown_and_unimplemented_variants():
+def test_unknown_variant():
     with pytest.raises(CompileError, match="unknown variant `cmyk`.*mono, rgb, spectral"):
         rdsl.jit(SRC, target="scalar", variant="cmyk")
-    with pytest.raises(CompileError, match="`spectral_polarized` is not implemented yet"):
-        rdsl.jit(SRC, target="scalar", variant="spectral_polarized")
+
+
+def test_mono_polarized_is_mono_times_identity():
+    """Colours are unpolarized: u times the identity Mueller matrix, u as in mono."""
+    x = np.array([0.0, 1.0, 2.0, -4.0], np.float32)
+    mono = rdsl.jit(SRC, target="avx2", variant="mono").tint(x)
+    out = rdsl.jit(SRC, target="avx2", variant="mono_polarized").tint(x)  # a dict of entries
+    got = np.stack([np.asarray(out[f"m{i}{j}"]) for i in range(4) for j in range(4)], 1)
+    got = got.reshape(4, 4, 4)
+    np.testing.assert_allclose(got, mono[:, None, None] * np.eye(4)[None], rtol=1e-6)

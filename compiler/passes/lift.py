@@ -34,14 +34,14 @@ import numpy as np
 
 from ..diagnostics import CompileError, Diagnostic
 from ..ir import (
+    ARITH_OPS,
     BOOL,
     F32,
     I32,
-    BufferType,
     Block,
+    BufferType,
     Builder,
     Instr,
-    MatType,
     Module,
     Op,
     ScalarType,
@@ -49,6 +49,7 @@ from ..ir import (
     StructType,
     TupleType,
     Type,
+    UnpolarizedType,
     Value,
     VecType,
     replace_uses,
@@ -63,20 +64,40 @@ _LUMINANCE = (0.212671, 0.715160, 0.072169)
 
 @dataclass(frozen=True)
 class SpectrumModel:
-    """How a variant represents ``Spectrum``: ``n`` f32 samples (1 = a plain ``f32``)."""
+    """How a variant represents ``Spectrum``: ``n`` f32 samples per unpolarized value (1 = a
+    plain ``f32``); when ``polarized``, a 4x4 Mueller matrix of such values (the struct
+    ``%Mueller``, row-major fields ``m00 .. m33``)."""
 
     variant: str
     n: int
     traits: frozenset[str]
+    polarized: bool = False
+
+    def unpolarized(self, lanes: int = 1) -> Type:
+        return F32.with_lanes(lanes) if self.n == 1 else VecType(self.n, lanes=lanes)
 
     def concrete(self, lanes: int = 1) -> Type:
-        return F32.with_lanes(lanes) if self.n == 1 else VecType(self.n, lanes=lanes)
+        if self.polarized:
+            return mueller_type(self.unpolarized(), lanes)
+        return self.unpolarized(lanes)
+
+
+MUELLER_FIELDS = tuple(f"m{i}{j}" for i in range(4) for j in range(4))
+
+
+def mueller_type(entry: Type, lanes: int = 1) -> StructType:
+    """The lifted polarized ``Spectrum``: 16 entries, row-major."""
+    return StructType("Mueller", tuple((f, entry) for f in MUELLER_FIELDS), lanes=lanes)
 
 
 MODELS = {
     "mono": SpectrumModel("mono", 1, frozenset({"mono"})),
     "rgb": SpectrumModel("rgb", 3, frozenset({"rgb"})),
     "spectral": SpectrumModel("spectral", 4, frozenset({"spectral"})),
+    "mono_polarized": SpectrumModel("mono_polarized", 1, frozenset({"mono", "polarized"}),
+                                    polarized=True),
+    "spectral_polarized": SpectrumModel("spectral_polarized", 4,
+                                        frozenset({"spectral", "polarized"}), polarized=True),
 }
 
 
@@ -84,9 +105,6 @@ def model_for(variant: str) -> SpectrumModel:
     """The spectrum model of ``variant``, or a diagnostic naming the accepted variants."""
     if variant in MODELS:
         return MODELS[variant]
-    if variant in VARIANTS:
-        raise CompileError(f"variant `{variant}` is not implemented yet "
-                           f"(available: {', '.join(MODELS)})")
     raise CompileError(f"unknown variant `{variant}` (expected one of: {', '.join(VARIANTS)})")
 
 
@@ -99,6 +117,8 @@ class Lift(Pass):
 
     # -- types -------------------------------------------------------------------------
     def lift_type(self, t: Type) -> Type:
+        if isinstance(t, UnpolarizedType):
+            return self.model.unpolarized(t.lanes)
         if isinstance(t, SpectrumType):
             return self.model.concrete(t.lanes)
         if isinstance(t, StructType):
@@ -112,6 +132,8 @@ class Lift(Pass):
     def run(self, module: Module) -> None:
         module.attrs["variant"] = self.model.variant
         module.structs = {k: self.lift_type(v) for k, v in module.structs.items()}
+        if self.model.polarized:
+            module.structs["Mueller"] = self.model.concrete()
         for fn in module.functions.values():
             for p in fn.params:
                 p.value.type = self.lift_type(p.value.type)
@@ -121,6 +143,7 @@ class Lift(Pass):
             self._fold_traits(fn.body, mapping)
             replace_uses(fn.body, mapping)
             self.spectral = _Spectral(self.model, fn.loc) if self.model.n == 4 else None
+            self.mueller = _Mueller(self.model) if self.model.polarized else None
             mapping = {}
             self._block(fn.body, mapping, top=True)
             replace_uses(fn.body, mapping)
@@ -169,9 +192,16 @@ class Lift(Pass):
             b = Builder(Block(), ins.loc)
             ops = [mapping.get(v, v) for v in ins.operands]
             if ins.op is Op.SPEC_SET:
-                self._set_wavelengths(ins, ops[0], top)
+                wl = ops[0]
+                if self.mueller is not None and self.mueller.is_mueller(wl):
+                    wl = self.mueller.entry(b, wl, 0, 0)
+                    out.extend(b.block.instrs)
+                self._set_wavelengths(ins, wl, top)
                 continue
-            replaced = self._rewrite(ins, b, ops)
+            if self.mueller is not None:
+                replaced = self.mueller.rewrite(self, ins, b, ops)
+            else:
+                replaced = self._rewrite(ins, b, ops)
             if replaced is None:
                 out.append(ins)
             else:
@@ -194,7 +224,8 @@ class Lift(Pass):
         return CompileError([Diagnostic(ins.loc, msg)])
 
     def _rewrite(self, ins: Instr, b: Builder, ops: list[Value]) -> Value | None:
-        """Return the replacement of ``ins``'s result, or None to keep ``ins``."""
+        """Return the replacement of ``ins``'s result, or None to keep ``ins``.  Unpolarized
+        values only: ``ins.type`` is the concrete spectrum (or what a spectrum op gives)."""
         n = self.model.n
         variant = self.model.variant
         if ins.op is Op.BROADCAST and n == 1 and isinstance(ops[0].type, ScalarType) \
@@ -237,8 +268,19 @@ class Lift(Pass):
             return acc if len(ops) == 3 else b.op(Op.MUL, F32, acc, ops[3])
         if ins.op is Op.SELECT and self.spectral is not None:
             return self.spectral.select(b, ins, ops)
-        if ins.op in (Op.MUL, Op.DIV) and isinstance(ins.type, MatType):
-            raise self._fail(ins, "matrix spectra are not supported here")
+        # Unpolarized variants: a spectrum is its own unpolarized part, and is read as
+        # depolarized light (only the intensity entry [0][0] exists).
+        if ins.op in (Op.SPEC_UNPOL, Op.SPEC_FROM, Op.SPEC_DEPOL):
+            return ops[0]
+        if ins.op is Op.SPEC_ENTRY:
+            if (ins.attrs["row"], ins.attrs["col"]) == (0, 0):
+                return ops[0]
+            zero = b.const(0.0, F32)
+            return zero if n == 1 else b.op(Op.BROADCAST, ins.type, zero)
+        if ins.op is Op.SPEC_MUELLER:
+            raise self._fail(ins, f"`mueller(...)` builds a Mueller matrix, which exists in "
+                             f"polarized variants only (this is `{variant}`); use it inside "
+                             "`if const polarized`")
         return None
 
     def _reduce(self, b: Builder, v: Value, op: Op, divide: bool = False) -> Value:
@@ -252,6 +294,159 @@ class Lift(Pass):
             acc = b.op(Op.DIV, F32, acc, b.const(float(self.model.n), F32))
         return acc
 
+
+_ELEMENTWISE_ONLY = {Op.DIV: "divide", Op.REM: "take the remainder of", Op.SQRT: "`sqrt`",
+                     Op.FLOOR: "`floor`", Op.CEIL: "`ceil`", Op.ABS: "`abs`", Op.MIN: "`min`",
+                     Op.MAX: "`max`"}
+
+
+class _Mueller:
+    """The polarized lowering of one kernel: every ``Spectrum`` is a Mueller matrix of
+    unpolarized values (Mitsuba 2, sec. 5: Stokes vectors are its first column).
+
+    Within the kernel it remembers, for each matrix it built, its 16 entries (None where the
+    entry is a known zero) and, for u * identity, the unpolarized u.  Products skip known
+    zeros, and operations that only make sense elementwise (division, sqrt, min...) are
+    allowed on matrices known to be u * identity, where they act on u."""
+
+    def __init__(self, model: SpectrumModel) -> None:
+        self.model = model
+        self.base = model.unpolarized()
+        self.type = model.concrete()
+        self.entries: dict[Value, list[Value | None]] = {}
+        self.scalar: dict[Value, Value] = {}
+
+    def is_mueller(self, v: Value) -> bool:
+        return isinstance(v.type, StructType) and v.type.name == "Mueller"
+
+    # -- building blocks -----------------------------------------------------------------
+    def zero(self, b: Builder) -> Value:
+        z = b.const(0.0, F32)
+        return z if self.model.n == 1 else b.op(Op.BROADCAST, self.base, z)
+
+    def get(self, b: Builder, v: Value) -> list[Value | None]:
+        if v in self.entries:
+            return self.entries[v]
+        return [b.op(Op.EXTRACT, self.base, v, index=i) for i in range(16)]
+
+    def entry(self, b: Builder, v: Value, i: int, j: int) -> Value:
+        if v in self.scalar:
+            return self.scalar[v] if i == j else self.zero(b)
+        e = self.get(b, v)[4 * i + j]
+        return self.zero(b) if e is None else e
+
+    def make(self, b: Builder, entries: list[Value | None]) -> Value:
+        z = self.zero(b) if any(e is None for e in entries) else None
+        v = b.op(Op.MAKE, self.type, *[z if e is None else e for e in entries])
+        self.entries[v] = entries
+        return v
+
+    def from_scalar(self, b: Builder, u: Value) -> Value:
+        v = self.make(b, [u if i % 5 == 0 else None for i in range(16)])
+        self.scalar[v] = u
+        return v
+
+    def splat(self, b: Builder, x: Value) -> Value:
+        """An f32 as an unpolarized value."""
+        return x if self.model.n == 1 else b.op(Op.BROADCAST, self.base, x)
+
+    def is_zero(self, v: Value) -> bool:
+        ins = v.owner
+        if isinstance(ins, Instr) and ins.op is Op.BROADCAST:
+            ins = ins.operands[0].owner
+        return isinstance(ins, Instr) and ins.op is Op.CONST and ins.attrs.get("value") == 0.0 \
+            and "trait" not in ins.attrs
+
+    def product(self, b: Builder, x: list[Value | None], y: list[Value | None]) -> list:
+        out: list[Value | None] = []
+        for i in range(4):
+            for j in range(4):
+                acc = None
+                for k in range(4):
+                    p, q = x[4 * i + k], y[4 * k + j]
+                    if p is None or q is None:
+                        continue
+                    t = b.op(Op.MUL, self.base, p, q)
+                    acc = t if acc is None else b.op(Op.ADD, self.base, acc, t)
+                out.append(acc)
+        return out
+
+    # -- the ops -------------------------------------------------------------------------
+    def rewrite(self, lift: Lift, ins: Instr, b: Builder, ops: list[Value]) -> Value | None:
+        """Return the replacement of ``ins``'s result, or None to keep it."""
+        base = self.base
+        res_m = len(ins.results) == 1 and self.is_mueller(ins.result)
+        op = ins.op
+        if op is Op.BROADCAST and res_m:
+            return self.from_scalar(b, self.splat(b, ops[0]))
+        if op in (Op.SPEC_RGB, Op.SPEC_MAKE, Op.SPEC_LAMBDA) and res_m:
+            ins.results[0].type = base
+            u = lift._rewrite(ins, b, ops)
+            ins.results[0].type = self.type
+            return self.from_scalar(b, u if u is not None else ins.result)
+        if op in (Op.SPEC_AVG, Op.SPEC_MAX, Op.SPEC_SRGB, Op.SPEC_UNPOL):
+            x = ops[0]
+            if self.is_mueller(x):
+                x = self.entry(b, x, 0, 0)
+            if op is Op.SPEC_UNPOL:
+                return x
+            return lift._rewrite(ins, b, [x])
+        if op is Op.SPEC_FROM:
+            return self.from_scalar(b, ops[0])
+        if op is Op.SPEC_DEPOL:
+            return self.make(b, [ops[0]] + [None] * 15)
+        if op is Op.SPEC_MUELLER:
+            return self.make(b, [None if self.is_zero(v) else v for v in ops])
+        if op is Op.SPEC_ENTRY:
+            return self.entry(b, ops[0], ins.attrs["row"], ins.attrs["col"])
+        if not res_m:
+            return lift._rewrite(ins, b, ops)
+        # -- arithmetic on Mueller matrices
+        if op in ARITH_OPS or op in _ELEMENTWISE_ONLY or op is Op.SELECT:
+            mats = [v for v in ops if self.is_mueller(v)]
+            if all(v in self.scalar for v in mats):  # all u * identity: act on the u's
+                args = [self.scalar.get(v, v) for v in ops]
+                return self.from_scalar(b, b.op(op, base, *args))
+        if op in (Op.ADD, Op.SUB):
+            x, y = self.get(b, ops[0]), self.get(b, ops[1])
+            out: list[Value | None] = []
+            for p, q in zip(x, y):
+                if q is None:
+                    out.append(p)
+                elif p is None:
+                    out.append(q if op is Op.ADD else b.op(Op.NEG, base, q))
+                else:
+                    out.append(b.op(op, base, p, q))
+            return self.make(b, out)
+        if op is Op.NEG:
+            return self.make(b, [None if p is None else b.op(Op.NEG, base, p)
+                                 for p in self.get(b, ops[0])])
+        if op is Op.SELECT:
+            x, y = self.get(b, ops[1]), self.get(b, ops[2])
+            out = []
+            for p, q in zip(x, y):
+                if p is None and q is None:
+                    out.append(None)
+                else:
+                    out.append(b.op(Op.SELECT, base, ops[0], self.zero(b) if p is None else p,
+                                    self.zero(b) if q is None else q))
+            return self.make(b, out)
+        if op is Op.MUL or (op is Op.DIV and ops[1] in self.scalar):
+            x, y = ops
+            if op is Op.DIV or y in self.scalar or x in self.scalar:
+                m, u = (y, self.scalar[x]) if x in self.scalar and op is Op.MUL \
+                    else (x, self.scalar[y])
+                return self.make(b, [None if p is None else b.op(op, base, p, u)
+                                     for p in self.get(b, m)])
+            return self.make(b, self.product(b, self.get(b, x), self.get(b, y)))
+        if op in _ELEMENTWISE_ONLY:
+            what = _ELEMENTWISE_ONLY[op]
+            verb = what if not what.startswith("`") else f"apply {what} to"
+            raise lift._fail(ins, f"cannot {verb} a polarized Spectrum (a Mueller matrix) in "
+                             f"the `{self.model.variant}` variant: that is defined on "
+                             "unpolarized values only; use `unpolarized(s)` or put this "
+                             "code inside `if const polarized { ... } else { ... }`")
+        return None
 
 
 class _Spectral:

@@ -146,7 +146,7 @@ def parameter_slots(scene: SceneSpec, variant: str = "rgb") -> tuple[SceneSpec, 
         if isinstance(value, (TextureRef, Slot)):
             return value
         if isinstance(value, SpectrumValue):
-            if variant != "spectral":
+            if variant.removesuffix("_polarized") != "spectral":
                 value = value.rgb
             elif value.samples is not None:
                 return value

@@ -25,8 +25,8 @@ from typing import Any
 
 from ...compiler.diagnostics import CompileError
 from ...compiler.passes.specialize import Instance
-from .colors import spectrum_value
 from ..scene.schema import spec_for
+from .colors import spectrum_value
 
 STDLIB = Path(__file__).resolve().parents[2] / "stdlib"
 # Mitsuba plugin -> rdsl file under stdlib/
@@ -34,13 +34,38 @@ BSDF_PLUGINS = {"diffuse": "bsdf.diffuse", "roughconductor": "bsdf.roughconducto
                 "conductor": "bsdf.conductor", "dielectric": "bsdf.dielectric",
                 "thindielectric": "bsdf.thindielectric", "plastic": "bsdf.plastic",
                 "roughplastic": "bsdf.roughplastic", "roughdielectric": "bsdf.roughdielectric",
-                "mixture": "bsdf.mixture"}
+                "mixture": "bsdf.mixture", "polarizer": "bsdf.polarizer",
+                "retarder": "bsdf.retarder"}
 COMBINATORS = ("twosided", "blendbsdf", "mask")  # Mitsuba's, all rdsl's `mixture`
 LEAF_PARAMS = ("a", "b")  # the mixture's parameters that hold leaf ids
 # every parameter of the mixture_*_buffers functions (which have no defaults)
 MIXTURE = {"a": 0, "b": 0, "weight": 0.0, "null": 0.0, "twosided": False, "by_side": False}
 DISTRIBUTIONS = {"ggx": 0, "beckmann": 1}
-TRANSMISSIVE = ("dielectric", "thindielectric", "roughdielectric")
+TRANSMISSIVE = ("dielectric", "thindielectric", "roughdielectric", "polarizer", "retarder")
+# what a polarizing plugin does in an unpolarized render (as Mitsuba 3)
+UNPOLARIZED_BEHAVIOUR = {
+    "polarizer": "a neutral filter that transmits 50% of the light (times its transmittance)",
+    "retarder": "fully transparent: it transmits all light unchanged"}
+
+
+def polarization_warnings(desc: Any, variant: str) -> list[str]:
+    """Warnings for plugins whose meaning is polarization, in an unpolarized variant."""
+    if variant.endswith("_polarized"):
+        return []
+    out, seen = [], set()
+    todo = [shape.bsdf for shape in desc.shapes if getattr(shape, "bsdf", None) is not None]
+    while todo:
+        plugin = todo.pop(0)
+        todo += plugin.children
+        if id(plugin) in seen:
+            continue
+        seen.add(id(plugin))
+        if plugin.type in UNPOLARIZED_BEHAVIOUR:
+            out.append(f"{plugin.loc or desc.path}: warning: {_where(plugin)} has no effect on "
+                       f"polarization in the unpolarized `{variant}` variant; it acts as "
+                       f"{UNPOLARIZED_BEHAVIOUR[plugin.type]} (as in Mitsuba 3). Render with "
+                       "`mono_polarized` or `spectral_polarized` to polarize light.")
+    return out
 
 
 @cache

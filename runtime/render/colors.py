@@ -39,7 +39,7 @@ def emission_row(rgb: np.ndarray, variant: str) -> tuple[np.ndarray, float]:
     """An emitted colour as an emitter table stores it: 3 floats and a scale (the rdsl
     ``illuminant(c0, c1, c2, scale)``)."""
     rgb = np.asarray(rgb, np.float64)
-    if variant != "spectral":
+    if variant.removesuffix("_polarized") != "spectral":
         return rgb, 1.0
     from ..spectral import illuminant_from_rgb
 
@@ -49,7 +49,7 @@ def emission_row(rgb: np.ndarray, variant: str) -> tuple[np.ndarray, float]:
 
 def encode_texels(texels: np.ndarray, variant: str) -> np.ndarray:
     """Reflectance texels (..., 3) as the variant stores them."""
-    if variant != "spectral":
+    if variant.removesuffix("_polarized") != "spectral":
         return texels
     from ..spectral import rgb_to_coeffs
 

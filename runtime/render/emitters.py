@@ -153,7 +153,7 @@ def _emitter_row(em: Any, what: str, variant: str = "rgb"
     elif em.type == "constant":
         _put_color(row, p["radiance"], f"{what}: 'radiance'", em.loc, variant)
     else:  # envmap
-        if variant == "spectral":
+        if variant.removesuffix("_polarized") == "spectral":
             raise CompileError(f"{what}: an environment map is not supported by the spectral "
                                "variant yet (use rgb, or a constant emitter)", em.loc)
         if p.get("filter_type", "bilinear") != "bilinear":

@@ -11,6 +11,7 @@ the film's reconstruction filter.
 from __future__ import annotations
 
 import time
+import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -26,7 +27,7 @@ from ...compiler.passes.specialize import (
     parameter_slots,
 )
 from ..scene import load_scene_description
-from .bsdfs import BSDF_PLUGINS, bsdf_instance, split_leaves
+from .bsdfs import BSDF_PLUGINS, bsdf_instance, polarization_warnings, split_leaves
 from .camera import camera_uniforms
 from .colors import encode_texels, spectrum_value
 from .emitters import KINDS as EMITTER_KINDS
@@ -212,7 +213,10 @@ def kernel_source(desc: Any, bufs: SceneBuffers, bsdfs: list[Instance],
                   emitters: list[Instance], channels: int = 3, variant: str = "rgb") -> str:
     """The scene's render kernel in rdsl: constants of this scene, stdlib code for the rest.
     A spectral kernel samples its wavelengths first and gives the film linear sRGB."""
-    spectral = variant == "spectral"
+    spectral = variant.removesuffix("_polarized") == "spectral"
+    # a polarized L is a Mueller matrix: the film records the intensity (entry [0][0], the
+    # first Stokes component for the unpolarized emitters), as Mitsuba's film does
+    mono_pol = variant == "mono_polarized"
     plan = integrator_plan(desc.integrator)
     aov_fields = _aov_fields(plan, channels, spectral)
     cam = camera_uniforms(desc.sensor)
@@ -233,7 +237,8 @@ def kernel_source(desc: Any, bufs: SceneBuffers, bsdfs: list[Instance],
     winit = ", ".join(f"w{k}: wx{k}" if k < m else f"w{k}: wy{k - m}" for k in range(2 * m))
     lines += [
         "",
-        f"struct FilmSample {{ value: {'Vec3' if spectral else 'Spectrum'}, bad: Bool, "
+        f"struct FilmSample {{ value: "
+        f"{'Vec3' if spectral else 'Unpolarized' if mono_pol else 'Spectrum'}, bad: Bool, "
         + "".join(f"aov{k}: {t}, " for k, (t, _) in enumerate(aov_fields)) + f"{wfields} }}",
         "",
         "fn render_sample(cell: Int, s: Int, spp: Int, seed: UInt, P: [Float], N: [Float],",
@@ -262,7 +267,8 @@ def kernel_source(desc: Any, bufs: SceneBuffers, bsdfs: list[Instance],
         lines.append(f"    let wy{k} = k * film_axis_weight(film, pos.y, gy - n + {k});")
     lines += [
         "    return FilmSample { value: "
-        + ("to_srgb(L * wavelength_weight)" if spectral else "L") + " * k, bad: !ok, "
+        + ("to_srgb(L * wavelength_weight)" if spectral else "unpolarized(L)" if mono_pol
+           else "L") + " * k, bad: !ok, "
         + "".join(f"aov{k}: {e} * k, " for k, (_, e) in enumerate(aov_fields))
         + f"{winit} }};",
         "}",
@@ -294,6 +300,8 @@ class Scene:
         self.spp = int(self.desc.sensor.sampler.params.get("sample_count", 4))
         self.seed = int(self.desc.sensor.sampler.params.get("seed", 0))
         self.buffers, self.bsdfs, self.emitters = flatten(self.desc, triangulate, variant)
+        for message in polarization_warnings(self.desc, variant):
+            warnings.warn(message, stacklevel=2)
         self.load_seconds = time.perf_counter() - t0
         self.embree = EmbreeScene(self.buffers.meshes)
         self.target = target
@@ -312,7 +320,7 @@ class Scene:
         if self._module is not None:
             return self._module
         src = kernel_source(self.desc, self.buffers, self.bsdfs, self.emitters,
-                            1 if self.variant == "mono" else 3, self.variant)
+                            1 if self.variant.startswith("mono") else 3, self.variant)
         bsdfs, leaves = split_leaves(self.bsdfs)  # combinators reach leaves by id
         kinds = tuple(sorted({int(k) for k in self.buffers.lights.EK[0::4]}))
         shapes = tuple(sorted({_shape_kind(int(g)) for g in self.buffers.G[3::4]}))
@@ -374,7 +382,7 @@ class Scene:
     def channel_names(self) -> list[str]:
         """The image's channels, as the EXR names them: R, G, B (Y in mono), then the AOVs of
         an ``aov`` integrator (runtime/render/integrators.py)."""
-        base = ["Y"] if self.variant == "mono" else ["R", "G", "B"]
+        base = ["Y"] if self.variant.startswith("mono") else ["R", "G", "B"]
         return base + integrator_plan(self.desc.integrator).aov_channel_names()
 
     def render(self, spp: int | None = None, seed: int | None = None,

@@ -113,6 +113,10 @@ _SPECS = [
     PluginSpec("bsdf", "roughplastic", {**_PLASTIC, "distribution": _DIST,
                                         "alpha": P("float", 0.1),
                                         "sample_visible": P("boolean", True)}),
+    # polarization: Mitsuba 3's angles are textures; rdsl takes constant degrees
+    PluginSpec("bsdf", "polarizer", {"theta": P("float", 0.0), "transmittance": P("color", 1.0),
+                                     "polarizing": P("boolean", True)}),
+    PluginSpec("bsdf", "retarder", {"theta": P("float", 0.0), "delta": P("float", 90.0)}),
     PluginSpec("bsdf", "twosided", {}, {"bsdf": (1, 2)}),
     PluginSpec("bsdf", "mask", {"opacity": P("ftex", 0.5)}, {"bsdf": (1, 1)}),
     PluginSpec("bsdf", "blendbsdf", {"weight": P("ftex", REQUIRED)}, {"bsdf": (2, 2)}),
