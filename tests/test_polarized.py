@@ -181,7 +181,8 @@ def _count(text: str) -> int:
     return len(re.findall(r"^\s+%\S+ = ", text, re.MULTILINE))
 
 
-@pytest.mark.parametrize("plugin", ["polarizer", "retarder", "conductor"])
+@pytest.mark.parametrize("plugin", ["polarizer", "retarder", "conductor", "dielectric",
+                                    "roughconductor", "diffuse"])
 def test_unpolarized_builds_have_no_mueller_arithmetic(plugin):
     path = str(STDLIB / "bsdf" / f"{plugin}.rdsl")
     for variant in ("mono", "rgb", "spectral"):
@@ -633,8 +634,8 @@ def test_stokes_integrator_in_unpolarized_variant_is_an_error(tmp_path):
 
 
 def test_stokes_integrator_needs_one_nested_integrator(tmp_path):
-    from rdsl.runtime.scene.errors import SceneError
     from rdsl.runtime.render.renderer import load_scene
+    from rdsl.runtime.scene.errors import SceneError
 
     path = tmp_path / "bad.xml"
     path.write_text(STOKES_SCENE.replace(
