@@ -192,13 +192,22 @@ def _radiance_call(plan: IntegratorPlan, bufs: SceneBuffers) -> str:
                 f"{int(integ.params.get('rr_depth', 5))}, {lights}, {args});")
     if plan.aovs:
         line += "\n    let aov = aov_sample(ray, P, N, UV, F, G, T);"
+    if plan.stokes is not None:  # the Stokes vector in the sensor's frame (as Mitsuba)
+        line += "\n    let Ls = stokes_sensor_frame(L, ray.d, cam.basis.t);"
     return line
 
 
 def _aov_fields(plan: IntegratorPlan, channels: int, spectral: bool = False
                 ) -> list[tuple[str, str]]:
-    """(rdsl type, expression) of each FilmSample AOV field, in film channel order."""
+    """(rdsl type, expression) of each FilmSample AOV field, in film channel order: the
+    Stokes components S0..S3 of a ``stokes`` integrator as RGB each (Mitsuba's layout; the
+    one value repeated in mono), then the AOVs."""
     fields = []
+    if plan.stokes is not None:
+        for i in range(4):
+            s = f"mueller_entry(Ls, {i}, 0)"
+            fields.append(("Vec3", f"to_srgb(Spectrum({s}) * wavelength_weight)" if spectral
+                           else f"Vec3(mean({s}))"))
     for _, kind in plan.aovs:
         if kind == "albedo":  # a Spectrum; mono repeats its one value in R, G and B
             fields.append(("Vec3", "Vec3(mean(aov.albedo))") if channels == 1
@@ -218,6 +227,7 @@ def kernel_source(desc: Any, bufs: SceneBuffers, bsdfs: list[Instance],
     # first Stokes component for the unpolarized emitters), as Mitsuba's film does
     mono_pol = variant == "mono_polarized"
     plan = integrator_plan(desc.integrator)
+    plan.check_variant(variant)
     aov_fields = _aov_fields(plan, channels, spectral)
     cam = camera_uniforms(desc.sensor)
     film = film_uniforms(desc.sensor.film, 1, channels=channels + len(plan.aov_channel_names()))
@@ -231,6 +241,8 @@ def kernel_source(desc: Any, bufs: SceneBuffers, bsdfs: list[Instance],
         lines.append("import render.direct;")
     if plan.aovs:
         lines.append("import render.aov;")
+    if plan.stokes is not None:
+        lines.append("import render.stokes;")
     lines += [f"import {m};" for m in imports]
     m = 2 * film_reach(film) + 1  # columns (rows) one sample reaches
     wfields = ", ".join(f"w{k}: Float" for k in range(2 * m))
@@ -299,6 +311,7 @@ class Scene:
         self.desc = load_scene_description(self.path, **defaults)
         self.spp = int(self.desc.sensor.sampler.params.get("sample_count", 4))
         self.seed = int(self.desc.sensor.sampler.params.get("seed", 0))
+        integrator_plan(self.desc.integrator).check_variant(variant)
         self.buffers, self.bsdfs, self.emitters = flatten(self.desc, triangulate, variant)
         for message in polarization_warnings(self.desc, variant):
             warnings.warn(message, stacklevel=2)
