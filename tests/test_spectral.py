@@ -206,3 +206,17 @@ def test_spectral_cbox_matches_mitsuba():
     generic = load_scene(CBOX, variant="spectral", target="host", specialize=False)
     np.testing.assert_allclose(generic.render(spp=4, seed=3), scene.render(spp=4, seed=3),
                                rtol=1e-3, atol=1e-4)
+
+
+def test_float_and_grey_parameters_are_flat_spectra():
+    """`<float name="k" value="3.9"/>` is Mitsuba's uniform spectrum 3.9, not a reflectance
+    fit (which would clamp it to 1); an emitter's grey stays a D65-shaped light."""
+    from rdsl.compiler.passes.specialize import SpectrumValue
+    from rdsl.runtime.render.colors import spectrum_value
+    from rdsl.runtime.scene.spectra import Color
+
+    assert spectrum_value(Color.gray(3.9), "conductor.k") == 3.9
+    assert spectrum_value(2.5, "conductor.eta") == 2.5
+    light = spectrum_value(Color.gray(3.9), "area.radiance", illuminant=True)
+    assert light == SpectrumValue((3.9, 3.9, 3.9), None, True)
+    assert isinstance(spectrum_value(Color((0.2, 0.9, 1.1)), "conductor.eta"), SpectrumValue)

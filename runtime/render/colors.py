@@ -20,9 +20,13 @@ from ...compiler.passes.specialize import SpectrumValue
 
 def spectrum_value(value: Any, what: str, illuminant: bool = False, loc: Any = None
                    ) -> SpectrumValue | float:
-    """A scene colour (``Color`` or a number) as a parameter value.  A number stays a number
-    for reflectances (a flat spectrum), but is a grey light for an emitter."""
+    """A scene colour (``Color`` or a number) as a parameter value.  A number or a grey stays
+    a number for everything but emitted light: a flat spectrum, whatever its value (a
+    conductor's k = 3.9 too); for an emitter it is a grey light (D65-shaped in spectral
+    builds), as in Mitsuba 3."""
     rgb = getattr(value, "rgb", None)
+    if rgb is not None and not illuminant and getattr(value, "is_uniform", False):
+        return float(rgb[0])  # a grey (or a <float>) is a flat spectrum, as Mitsuba's uniform
     if rgb is None:
         if isinstance(value, bool) or not isinstance(value, (int, float)):
             raise CompileError(f"{what}: a texture is not supported here (give an rgb or a "
