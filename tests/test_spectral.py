@@ -220,3 +220,36 @@ def test_float_and_grey_parameters_are_flat_spectra():
     light = spectrum_value(Color.gray(3.9), "area.radiance", illuminant=True)
     assert light == SpectrumValue((3.9, 3.9, 3.9), None, True)
     assert isinstance(spectrum_value(Color((0.2, 0.9, 1.1)), "conductor.eta"), SpectrumValue)
+
+
+MATERIALS = Path(__file__).resolve().parent.parent / "bench" / "scenes" / "materials.xml"
+
+
+@pytest.mark.skipif(not CBOX.is_file(), reason=f"{CBOX} is not present")
+def test_spectral_conductor_and_glass_match_mitsuba():
+    """Copper from tabulated complex IOR (interpolated at the sample's wavelengths) and a
+    glass sphere, against Mitsuba 3's llvm_ad_spectral rendered here at the same size."""
+    pytest.importorskip("rdsl.runtime.embree")
+    import os
+
+    os.environ.setdefault("DRJIT_LIBLLVM_PATH", "/usr/lib/x86_64-linux-gnu/libLLVM.so.19.1")
+    mi = pytest.importorskip("mitsuba", reason="the mitsuba package is not installed")
+    previous = mi.variant()
+    try:
+        mi.set_variant("llvm_ad_spectral")
+    except Exception as e:  # noqa: BLE001 - no LLVM here
+        pytest.skip(f"mitsuba llvm_ad_spectral unavailable: {e}")
+    try:
+        ref = np.array(mi.render(mi.load_file(str(MATERIALS), res=32), spp=512, seed=7))
+    finally:
+        if previous:
+            mi.set_variant(previous)
+    from rdsl.runtime.render.renderer import load_scene
+
+    img = load_scene(MATERIALS, variant="spectral", target="host", res=32).render(spp=512,
+                                                                                  seed=3)
+    np.testing.assert_allclose(img.mean(axis=(0, 1)), ref.mean(axis=(0, 1)), rtol=1e-2)
+    blocks = lambda x: x.reshape(4, 8, 4, 8, 3).mean(axis=(1, 3))  # noqa: E731
+    # 8x8-pixel blocks away from the light (its row is the brightest and noisiest)
+    diff = np.abs(blocks(img) - blocks(ref))[1:]
+    assert diff.max() < 0.03, diff.max()
