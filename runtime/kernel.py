@@ -214,13 +214,18 @@ class Kernel:
 
     # -- calling -------------------------------------------------------------------------
     def __call__(self, *args: Any, mask: Any = None, threads: int | None = None,
-                 **kwargs: Any) -> Any:
+                 out: Any = None, **kwargs: Any) -> Any:
         """Run the kernel over arrays.
 
         Positional arguments are the source-level varying params and the buffers, in order
         (they may also be given by keyword); uniform params are keywords (defaults from the
         manifest).  Returns a (N,) array, a (N, k) array for vectors, a dict for structs, a
-        tuple for tuples, or None."""
+        tuple for tuples, or None.
+
+        ``out``: the result of an earlier call of this kernel over as many elements; the
+        kernel writes into its arrays (lanes outside ``mask`` keep their old values) and
+        returns it.  A loop of calls then reuses its memory instead of faulting in fresh
+        pages on every call."""
         pos = self._positional
         if len(args) > len(pos):
             raise self._err(f"expected {len(pos)} positional arguments "
@@ -298,20 +303,24 @@ class Kernel:
             c_vals[slot] = a.ctypes.data
 
         outs = [(i, a) for i, a in enumerate(self.args) if a["kind"] == "output"]
-        alloc = np.zeros if mask is not None else np.empty
         out_arrays = {}
-        # outputs of one dtype are the rows of one block, in result order: a vector result
-        # is then a view (no copy), and consecutive leaves are one contiguous array
-        blocks = {}
-        for dt in dict.fromkeys(a["dtype"] for _, a in outs):
-            count = sum(1 for _, a in outs if a["dtype"] == dt)
-            blocks[dt] = [alloc((count, n), dtype=_C_DTYPES[dt]), 0]
-        for i, a in outs:
-            blk = blocks[a["dtype"]]
-            arr = blk[0][blk[1]]
-            blk[1] += 1
-            out_arrays[a["name"]] = arr
-            c_vals[i] = arr.ctypes.data
+        if out is not None:
+            for (i, _), arr in zip(outs, self._out_leaves(out, n)):
+                c_vals[i] = arr.ctypes.data
+        else:
+            # outputs of one dtype are the rows of one block, in result order: a vector
+            # result is then a view (no copy), and consecutive leaves are one contiguous array
+            alloc = np.zeros if mask is not None else np.empty
+            blocks = {}
+            for dt in dict.fromkeys(a["dtype"] for _, a in outs):
+                count = sum(1 for _, a in outs if a["dtype"] == dt)
+                blocks[dt] = [alloc((count, n), dtype=_C_DTYPES[dt]), 0]
+            for i, a in outs:
+                blk = blocks[a["dtype"]]
+                arr = blk[0][blk[1]]
+                blk[1] += 1
+                out_arrays[a["name"]] = arr
+                c_vals[i] = arr.ctypes.data
         for i, a in enumerate(self.args):
             if a["kind"] == "buffer":
                 c_vals[i] = c_vals[i].ctypes.data
@@ -319,7 +328,7 @@ class Kernel:
 
         self._run(n, c_vals, mask_ptr, threads)
         del keep
-        return self._results(out_arrays, n)
+        return out if out is not None else self._results(out_arrays, n)
 
     def _run(self, n: int, c_vals: list[Any], mask_ptr: Any, threads: int | None) -> None:
         if n <= 0:
@@ -336,6 +345,54 @@ class Kernel:
         futures = [pool.submit(self._range, b, e, *c_vals, mask_ptr) for b, e in bounds]
         for f in futures:
             f.result()
+
+    def _out_leaves(self, result: Any, n: int) -> list[np.ndarray]:
+        """The arrays of ``result`` (as ``_results`` builds it) for the output arguments, in
+        their order, checked to be writeable contiguous views of ``n`` elements of the right
+        dtype."""
+        bad = self._err(f"`out` is not a result of this kernel over {n} elements")
+        leaves: list[np.ndarray] = []
+
+        def walk(v: Any, t: dict[str, Any]) -> None:
+            kind = t["kind"]
+            if kind == "struct":
+                if not isinstance(v, dict):
+                    raise bad
+                for f, ft in t["fields"]:
+                    walk(v[f], ft)
+            elif kind == "tuple":
+                if not isinstance(v, tuple) or len(v) != len(t["elems"]):
+                    raise bad
+                for e, et in zip(v, t["elems"]):
+                    walk(e, et)
+            elif kind in ("vec", "mat"):
+                a = np.asarray(v)
+                if a.ndim < 2 or a.shape[0] != n:
+                    raise bad
+                cols = a.reshape(n, -1)
+                if not np.may_share_memory(cols, a):
+                    raise bad
+                leaves.extend(cols[:, j] for j in range(cols.shape[1]))
+            else:
+                leaves.append(np.asarray(v))
+
+        tj = self.result.get("type")
+        if tj is not None:
+            walk(result, tj)
+        names = self.result["leaves"]
+        if len(leaves) != len(names):
+            raise bad
+        by_name = dict(zip(names, leaves))
+        arrays = []
+        for a in self.args:
+            if a["kind"] != "output":
+                continue
+            leaf = by_name[a["name"]]
+            if leaf.shape != (n,) or leaf.dtype != DTYPES[a["dtype"]] or \
+                    not leaf.flags.c_contiguous or not leaf.flags.writeable:
+                raise bad
+            arrays.append(leaf)
+        return arrays
 
     def _results(self, out_arrays: dict[str, np.ndarray], n: int) -> Any:
         tj = self.result.get("type")

@@ -353,12 +353,16 @@ class Scene:
         self.nonfinite = 0
         bar = Progress(spp, label="rendering", unit="spp", enabled=progress)
         done = 0
+        out, cell = None, None  # reused while the batch size stays: no fresh pages per batch
         while done < spp:
             n = min(batch, spp - done)
-            cell = np.repeat(np.arange(cells, dtype=np.int32), n)
-            s = np.tile(np.arange(done, done + n, dtype=np.int32), cells)
+            if cell is None or len(cell) != cells * n:
+                cell = np.repeat(np.arange(cells, dtype=np.int32), n)
+                s = np.empty(cells * n, dtype=np.int32)
+                out = None
+            s.reshape(cells, n)[:] = np.arange(done, done + n, dtype=np.int32)
             out = mod["render_sample"](cell, s, spp, np.uint32(seed), *self.buffers.args(),
-                                       *self._param_args(mod), threads=threads)
+                                       *self._param_args(mod), threads=threads, out=out)
             S = _film_samples(out, len(cell))
             mod["film_pass"](pixels, n, S, len(cell), acc, threads=threads)
             self.nonfinite += int(np.count_nonzero(out["bad"]))
