@@ -360,10 +360,11 @@ class Scene:
         while done < spp:
             n = min(batch, spp - done)
             if cell is None or len(cell) != cells * n:
-                cell = np.repeat(np.arange(cells, dtype=np.int32), n)
+                # sample-major, as film_pass reads them: sample s of every cell, then s + 1
+                cell = np.tile(np.arange(cells, dtype=np.int32), n)
                 s = np.empty(cells * n, dtype=np.int32)
                 out = None
-            s.reshape(cells, n)[:] = np.arange(done, done + n, dtype=np.int32)
+            s.reshape(n, cells)[:] = np.arange(done, done + n, dtype=np.int32)[:, None]
             out = mod["render_sample"](cell, s, spp, np.uint32(seed), *self.buffers.args(),
                                        *self._param_args(mod), threads=threads, out=out)
             S = _film_samples(out, len(cell))
