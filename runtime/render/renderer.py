@@ -74,6 +74,18 @@ def _rgb(value: Any, what: str) -> tuple[float, float, float] | float:
     raise CompileError(f"{what}: textures are not supported by the renderer yet")
 
 
+def _flat(v: np.ndarray, f: np.ndarray, normals: Any) -> bool:
+    """Whether every triangle's vertex normals are its geometric normal (a rectangle, a
+    cube): interpolating them gives that normal again, so the mesh is shaded with face
+    normals, and the kernels skip reading and interpolating them."""
+    n = np.asarray(normals, np.float64)[f]  # (M, 3 vertices, 3)
+    tri = v.astype(np.float64)[f]
+    ng = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+    ng /= np.maximum(np.linalg.norm(ng, axis=1, keepdims=True), 1e-30)
+    n = n / np.maximum(np.linalg.norm(n, axis=2, keepdims=True), 1e-30)
+    return bool(len(f)) and bool(np.all(np.einsum("mkj,mj->mk", n, ng) > 1 - 1e-6))
+
+
 def flatten(desc: Any) -> tuple[SceneBuffers, list[Instance], list[Instance]]:
     """Concatenate the scene's meshes and collect its BSDF and emitter instances."""
     P, N, UV, F, G = [], [], [], [], []
@@ -91,7 +103,7 @@ def flatten(desc: Any) -> tuple[SceneBuffers, list[Instance], list[Instance]]:
         meshes.append((v, f))
         flags = 0
         P.append(v.reshape(-1))
-        if m.normals is not None and not m.face_normals:
+        if m.normals is not None and not m.face_normals and not _flat(v, f, m.normals):
             N.append(np.asarray(m.normals, np.float32).reshape(-1))
             flags |= 1
         else:
