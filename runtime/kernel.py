@@ -11,7 +11,7 @@ import ctypes
 import math
 import numbers
 import os
-from concurrent.futures import ThreadPoolExecutor
+from concurrent.futures import Future, ThreadPoolExecutor
 from typing import Any
 
 import numpy as np
@@ -49,6 +49,22 @@ def _pool(threads: int) -> ThreadPoolExecutor:
         pool = _POOLS[threads] = ThreadPoolExecutor(max_workers=threads,
                                                     thread_name_prefix="rdsl")
     return pool
+
+
+class Pending:
+    """A kernel call running on the thread pool; ``result()`` waits for it and returns what
+    the call returns."""
+
+    def __init__(self, futures: list[Future], keep: Any, finish: Any) -> None:
+        self._futures = futures
+        self._keep = keep  # the arguments' buffers, alive until the call has run
+        self._finish = finish
+
+    def result(self) -> Any:
+        for f in self._futures:
+            f.result()
+        self._futures, self._keep = [], None
+        return self._finish()
 
 
 class Kernel:
@@ -214,7 +230,7 @@ class Kernel:
 
     # -- calling -------------------------------------------------------------------------
     def __call__(self, *args: Any, mask: Any = None, threads: int | None = None,
-                 out: Any = None, **kwargs: Any) -> Any:
+                 out: Any = None, wait: bool = True, **kwargs: Any) -> Any:
         """Run the kernel over arrays.
 
         Positional arguments are the source-level varying params and the buffers, in order
@@ -225,7 +241,11 @@ class Kernel:
         ``out``: the result of an earlier call of this kernel over as many elements; the
         kernel writes into its arrays (lanes outside ``mask`` keep their old values) and
         returns it.  A loop of calls then reuses its memory instead of faulting in fresh
-        pages on every call."""
+        pages on every call.
+
+        ``wait=False`` returns a :class:`Pending` at once, while the thread pool runs the
+        call: calls queued together share the pool, so one's last tasks overlap the next's
+        first (the arrays passed in must not change until ``result()``)."""
         pos = self._positional
         if len(args) > len(pos):
             raise self._err(f"expected {len(pos)} positional arguments "
@@ -326,25 +346,30 @@ class Kernel:
                 c_vals[i] = c_vals[i].ctypes.data
         mask_ptr = mask_arr.ctypes.data if mask is not None else None
 
-        self._run(n, c_vals, mask_ptr, threads)
-        del keep
-        return out if out is not None else self._results(out_arrays, n)
+        futures = self._run(n, c_vals, mask_ptr, threads)
+        pending = Pending(futures, (keep, mask_arr if mask is not None else None, c_vals),
+                          lambda: out if out is not None else self._results(out_arrays, n))
+        return pending if not wait else pending.result()
 
-    def _run(self, n: int, c_vals: list[Any], mask_ptr: Any, threads: int | None) -> None:
+    def _run(self, n: int, c_vals: list[Any], mask_ptr: Any, threads: int | None
+             ) -> list[Future]:
+        """Run over [0, n): on this thread, or as tasks of the thread pool (their futures
+        are returned, not waited for)."""
         if n <= 0:
-            return
+            return []
         threads = (os.cpu_count() or 1) if threads is None else max(1, int(threads))
         if threads == 1 or n < 2 * MIN_CHUNK:
             self._fn(n, *c_vals, mask_ptr)
-            return
+            return []
         W = max(self.width, 1)
-        chunk = max(MIN_CHUNK, math.ceil(n / (threads * CHUNKS_PER_THREAD)))
-        chunk = (chunk + W - 1) // W * W
+        # tasks of at least MIN_CHUNK elements, as many for every thread: with one task
+        # more for some, the others would wait for it at the end of every call
+        tasks = max(1, min(threads * CHUNKS_PER_THREAD, n // MIN_CHUNK))
+        tasks = -(-tasks // threads) * threads
+        chunk = -(-math.ceil(n / tasks) // W) * W
         bounds = [(b, min(b + chunk, n)) for b in range(0, n, chunk)]
         pool = _pool(threads)
-        futures = [pool.submit(self._range, b, e, *c_vals, mask_ptr) for b, e in bounds]
-        for f in futures:
-            f.result()
+        return [pool.submit(self._range, b, e, *c_vals, mask_ptr) for b, e in bounds]
 
     def _out_leaves(self, result: Any, n: int) -> list[np.ndarray]:
         """The arrays of ``result`` (as ``_results`` builds it) for the output arguments, in

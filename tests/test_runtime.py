@@ -184,6 +184,18 @@ def test_out_reuses_a_result(mod):
         mod["bsdf.shade"](_surf(5, rng), np.zeros((5, 3)), out=first)
 
 
+def test_calls_queued_together(mod):
+    rng = np.random.default_rng(4)
+    n = 50_001
+    si, wo = _surf(n, rng), rng.standard_normal((n, 3)).astype(np.float32)
+    first = mod["bsdf.shade"](si, wo, threads=3, wait=False)
+    second = mod.lerp(wo[:, 0], wo[:, 1], wo[:, 2], threads=3, wait=False)
+    np.testing.assert_array_equal(second.result(), mod.lerp(wo[:, 0], wo[:, 1], wo[:, 2]))
+    got, want = first.result(), mod["bsdf.shade"](si, wo)
+    for k in want:
+        np.testing.assert_array_equal(got[k], want[k])
+
+
 def test_load_paths_and_module(mod, tmp_path):
     path = mod.path
     for p in (path, path.with_suffix(".json"), path.with_suffix("")):

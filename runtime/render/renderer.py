@@ -367,23 +367,38 @@ class Scene:
         pixels = np.arange(film["crop_w"] * film["crop_h"], dtype=np.int32)
         self.nonfinite = 0
         bar = Progress(spp, label="rendering", unit="spp", enabled=progress)
-        done = 0
-        out, cell = None, None  # reused while the batch size stays: no fresh pages per batch
-        while done < spp:
-            n = min(batch, spp - done)
-            if cell is None or len(cell) != cells * n:
-                # sample-major, as film_pass reads them: sample s of every cell, then s + 1
-                cell = np.tile(np.arange(cells, dtype=np.int32), n)
-                s = np.empty(cells * n, dtype=np.int32)
-                out = None
-            s.reshape(n, cells)[:] = np.arange(done, done + n, dtype=np.int32)[:, None]
-            out = mod["render_sample"](cell, s, spp, np.uint32(seed), *self.buffers.args(),
-                                       *self._param_args(mod), threads=threads, out=out)
-            S = _film_samples(out, len(cell))
-            mod["film_pass"](pixels, n, S, len(cell), acc, threads=threads)
-            self.nonfinite += int(np.count_nonzero(out["bad"]))
-            done += n
-            bar.update(done)
+        # batch k renders while the film takes batch k - 1 (their tasks share the thread
+        # pool, so neither waits for the other's last tasks); each batch's output block is
+        # reused two batches later, so no batch faults in fresh pages
+        outs: list[Any] = [None, None]
+        cell = None
+        waiting = None  # (samples, n) of the rendered batch the film has not taken yet
+        done = k = 0
+        while done < spp or waiting is not None:
+            job = None
+            if done < spp:
+                n = min(batch, spp - done)
+                if cell is None or len(cell) != cells * n:
+                    # sample-major, as film_pass reads them: sample s of every cell, then s+1
+                    cell = np.tile(np.arange(cells, dtype=np.int32), n)
+                    s = np.empty(cells * n, dtype=np.int32)
+                    outs = [None, None]
+                s.reshape(n, cells)[:] = np.arange(done, done + n, dtype=np.int32)[:, None]
+                job = mod["render_sample"](cell, s, spp, np.uint32(seed), *self.buffers.args(),
+                                           *self._param_args(mod), threads=threads,
+                                           out=outs[k % 2], wait=False)
+            if waiting is not None:
+                prev, m = waiting
+                ns = len(prev["bad"])
+                mod["film_pass"](pixels, m, _film_samples(prev, ns), ns, acc, threads=threads)
+                self.nonfinite += int(np.count_nonzero(prev["bad"]))
+                bar.update(done)
+            waiting = None
+            if job is not None:
+                outs[k % 2] = job.result()
+                waiting = (outs[k % 2], n)
+                done += n
+                k += 1
         bar.finish()
         return develop(acc, dict(film, spp=spp))
 
