@@ -89,10 +89,10 @@ class Lowering:
             raise CompileError(f"LLVM backend: use of undefined value {value!r}") from None
 
     def from_memory(self, value: ir.Value) -> bool:
-        """Whether ``value`` is computed from something read from memory or a ray query (a
-        gather's index then points anywhere; one from the kernel's own params, counters and
-        constants may well walk an array lane by lane).  Values carried by loops count as
-        not."""
+        """Whether ``value`` is computed from something each lane read from memory or a ray
+        query (a gather's index then points anywhere; one from the kernel's own params,
+        counters, constants and uniform loads may well walk an array lane by lane).  Values
+        carried by loops count as not."""
         memo = self._from_memory
         stack = [value]
         while stack:
@@ -379,7 +379,9 @@ def _lower_store(lw: Lowering, ins: ir.Instr) -> None:
     lw.b.store(_to_mem(lw, lw.v(val), e), p, align=ALIGN[e.name])
 
 
-_MEMORY_OPS = frozenset({ir.Op.LOAD, ir.Op.GATHER, ir.Op.INTERSECT, ir.Op.OCCLUDED})
+# ops whose results vary per lane with memory (a uniform `load` is the same for every lane,
+# so an index built from one still walks lane by lane)
+_MEMORY_OPS = frozenset({ir.Op.GATHER, ir.Op.INTERSECT, ir.Op.OCCLUDED})
 
 
 def _lower_gather(lw: Lowering, ins: ir.Instr) -> L.Value:

@@ -215,11 +215,17 @@ def kernel_source(desc: Any, bufs: SceneBuffers, bsdfs: list[Instance],
         "struct FilmSample { value: Spectrum, bad: Bool, "
         + "".join(f"aov{k}: {t}, " for k, (t, _) in enumerate(aov_fields)) + f"{wfields} }}",
         "",
-        "fn render_sample(cell: Int, s: Int, spp: Int, seed: UInt, P: [Float], N: [Float],",
+        "// sample j of a batch: sample BATCH[0] + j / cells of cell j % cells (sample-major,",
+        "// as film_pass reads them); BATCH = [first sample, spp, seed], the same for every j",
+        "fn render_sample(j: Int, BATCH: [Int], P: [Float], N: [Float],",
         "                 UV: [Float], F: [Int], G: [Int], LC: [Float], LT: [Int],",
         "                 T: [Float], EK: [Int], E: [Float], ENV: [Float]) -> FilmSample {",
         f"    let cam = {_literal(cam, 'Camera')};",
         f"    let film = {_literal(dict(film, spp=1), 'Film')};",
+        f"    let cell = j % {film['grid_w'] * film['grid_h']};",
+        f"    let s = BATCH[0] + j / {film['grid_w'] * film['grid_h']};",
+        "    let spp = BATCH[1];",
+        "    let seed = UInt(BATCH[2]);",
         f"    let gx = cell % {film['grid_w']} + {film['grid_x']};",
         f"    let gy = cell / {film['grid_w']} + {film['grid_y']};",
         "    let stream = UInt64(cell) * UInt64(spp) + UInt64(s);",
@@ -244,10 +250,11 @@ def kernel_source(desc: Any, bufs: SceneBuffers, bsdfs: list[Instance],
         "}",
         "",
         "// the film's layout is a constant of the scene, so its loops and filter fold",
-        "fn film_pass(pixel: Int, spp: Int, S: [Float], ns: Int, acc: [Float]) {",
+        "// FB = [samples per cell in the batch, samples in the batch]",
+        "fn film_pass(pixel: Int, FB: [Int], S: [Float], acc: [Float]) {",
         f"    var film = {_literal(dict(film, spp=0), 'Film')};",
-        "    film.spp = spp;",
-        "    film_accumulate_separable(pixel, film, S, ns, acc);",
+        "    film.spp = FB[0];",
+        "    film_accumulate_separable(pixel, film, S, FB[1], acc);",
         "}",
         "",
     ]
@@ -371,26 +378,25 @@ class Scene:
         # pool, so neither waits for the other's last tasks); each batch's output block is
         # reused two batches later, so no batch faults in fresh pages
         outs: list[Any] = [None, None]
-        cell = None
+        j = np.arange(cells * batch, dtype=np.int32)  # a batch's sample indices
+        seed_bits = int(np.uint32(seed).view(np.int32))
         waiting = None  # (samples, n) of the rendered batch the film has not taken yet
         done = k = 0
         while done < spp or waiting is not None:
             job = None
             if done < spp:
                 n = min(batch, spp - done)
-                if cell is None or len(cell) != cells * n:
-                    # sample-major, as film_pass reads them: sample s of every cell, then s+1
-                    cell = np.tile(np.arange(cells, dtype=np.int32), n)
-                    s = np.empty(cells * n, dtype=np.int32)
+                if n != batch:  # the last, smaller batch
                     outs = [None, None]
-                s.reshape(n, cells)[:] = np.arange(done, done + n, dtype=np.int32)[:, None]
-                job = mod["render_sample"](cell, s, spp, np.uint32(seed), *self.buffers.args(),
+                rs = np.array([done, spp, seed_bits], np.int32)
+                job = mod["render_sample"](j[:cells * n], rs, *self.buffers.args(),
                                            *self._param_args(mod), threads=threads,
                                            out=outs[k % 2], wait=False)
             if waiting is not None:
                 prev, m = waiting
                 ns = len(prev["bad"])
-                mod["film_pass"](pixels, m, _film_samples(prev, ns), ns, acc, threads=threads)
+                mod["film_pass"](pixels, np.array([m, ns], np.int32), _film_samples(prev, ns),
+                                 acc, threads=threads)
                 self.nonfinite += int(np.count_nonzero(prev["bad"]))
                 bar.update(done)
             waiting = None
