@@ -38,18 +38,22 @@ def reference_for(scene: Path) -> Path | None:
 
 
 def interleaved_medians(fns: dict[str, Callable[[int], np.ndarray]], repeat: int
-                        ) -> dict[str, tuple[float, np.ndarray]]:
-    """Median seconds (and the last image) of each renderer in ``fns``, after a warm-up
-    (compilation, caches, page faults).  The renderers take turns, one run each per repeat,
-    so a change in the machine's load (it is shared) hits them alike."""
+                        ) -> dict[str, tuple[float, float, np.ndarray]]:
+    """Median wall seconds, median CPU seconds (all the process's threads) and the last image
+    of each renderer in ``fns``, after a warm-up (compilation, caches, page faults).  The
+    renderers take turns, one run each per repeat, so a change in the machine's load (it is
+    shared) hits them alike; CPU seconds hardly change with the load at all."""
     imgs = {name: fn(0) for name, fn in fns.items()}
     times: dict[str, list[float]] = {name: [] for name in fns}
+    cpus: dict[str, list[float]] = {name: [] for name in fns}
     for k in range(repeat):
         for name, fn in fns.items():
-            t = time.perf_counter()
+            t, c = time.perf_counter(), time.process_time()
             imgs[name] = fn(k + 1)
             times[name].append(time.perf_counter() - t)
-    return {name: (statistics.median(times[name]), imgs[name]) for name in fns}
+            cpus[name].append(time.process_time() - c)
+    return {name: (statistics.median(times[name]), statistics.median(cpus[name]), imgs[name])
+            for name in fns}
 
 
 def rdsl_renderer(scene: Path, threads: int, target: str):
@@ -120,25 +124,27 @@ def main() -> None:
               f"{s.compile().target}, median of {args.repeat} runs; rdsl kernels "
               f"{'from cache' if s.from_cache else f'compiled in {compile_s:.2f} s'}")
         print(f"{'spp':>5} | {'rdsl s':>8} {'Mpath/s':>8} {'RMSE':>8} | {'mitsuba s':>9} "
-              f"{'Mpath/s':>8} {'RMSE':>8} | {'time ratio':>10} {'equal-error':>11}")
+              f"{'Mpath/s':>8} {'RMSE':>8} | {'time ratio':>10} {'equal-error':>11} "
+              f"{'cpu ratio':>9}")
         rows = []
         for spp in args.spp:
-            tr, ir = rd[spp]
+            tr, cr, ir = rd[spp]
             er = rmse(ir, ref) if ref is not None else float("nan")
             line = f"{spp:5d} | {tr:8.3f} {npix * spp / tr / 1e6:8.2f} {er:8.4f} |"
             if mi:
-                tm, im = mi[spp]
+                tm, cm, im = mi[spp]
                 em = rmse(im, ref) if ref is not None else float("nan")
                 eq = (tr * er * er) / (tm * em * em)
                 line += f" {tm:9.3f} {npix * spp / tm / 1e6:8.2f} {em:8.4f} | {tr / tm:10.2f} " \
-                        f"{eq:11.2f}"
+                        f"{eq:11.2f} {cr / cm:9.2f}"
                 rows.append((spp, tr, er, tm, em))
             else:
                 rows.append((spp, tr, er, None, None))
             print(line)
         curves[scene.name] = rows
     print("\ntime ratio = rdsl seconds / Mitsuba seconds at the same spp; equal-error = the "
-          "ratio of times to reach the same RMSE (below 1: rdsl is faster)")
+          "ratio of times to reach the same RMSE (below 1: rdsl is faster); cpu ratio = the "
+          "ratio of CPU seconds (all threads), which a loaded machine hardly changes")
     try:
         import matplotlib
 
