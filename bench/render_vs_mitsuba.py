@@ -112,9 +112,9 @@ def main() -> None:
         mi_render = mitsuba_renderer(scene, args.threads)
         rd, mi = {}, {} if mi_render else None
         for spp in args.spp:
-            fns = {"rdsl": lambda seed, spp=spp: rd_render(spp, seed)}
+            fns = {"rdsl": lambda seed, spp=spp, r=rd_render: r(spp, seed)}
             if mi_render:
-                fns["mitsuba"] = lambda seed, spp=spp: mi_render(spp, seed)
+                fns["mitsuba"] = lambda seed, spp=spp, r=mi_render: r(spp, seed)
             res = interleaved_medians(fns, args.repeat)
             rd[spp] = res["rdsl"]
             if mi_render:
