@@ -6,7 +6,9 @@ The loader has resolved every Mitsuba parameter (defaults filled in, ``material`
 Each one is passed to the rdsl plugin's parameter of the same name, after these conversions:
 ``distribution`` "ggx"/"beckmann" to 0/1, ``alpha_u``/``alpha_v`` to ``alpha``/``alpha_v``
 (or to ``alpha`` alone where the plugin is isotropic and they agree), colors to RGB tuples and
-textures to references.  A parameter the rdsl plugin does not have is an error unless it
+textures to references (on a ``Float`` parameter, such as a roughness, to the texture's
+one-value lookup, Mitsuba's ``eval_1``; the scene schema says which parameters may be
+textures).  A parameter the rdsl plugin does not have is an error unless it
 holds Mitsuba's default, so nothing is dropped silently.
 
 A combinator is an instance of the rdsl plugin ``mixture`` (``stdlib/bsdf/mixture.rdsl``)
@@ -83,10 +85,12 @@ def _value(plugin: Any, name: str, value: Any, textures: Any) -> Any:
     """A parameter value as ``specialize`` takes it."""
     what = f"{plugin.type}.{name}"
     if getattr(value, "category", None) == "texture":
-        if textures is None or plugin_params(plugin.type).get(name) != "Texture":
+        kind = plugin_params(plugin.type).get(name)
+        if textures is None or kind not in ("Texture", "Float"):
             raise CompileError(f"{_where(plugin)}: a texture for `{name}` is not supported by "
                                "the renderer yet", plugin.loc)
-        return textures.ref(value, what)
+        # a Float parameter (a roughness) reads the texture's one-value lookup
+        return textures.ref(value, what, scalar=kind == "Float")
     if getattr(value, "rgb", None) is not None:
         return spectrum_value(value, what, loc=plugin.loc)
     if isinstance(value, (bool, int, float)):

@@ -29,7 +29,7 @@ from ...compiler.passes.specialize import (
 from ..scene import load_scene_description
 from .bsdfs import BSDF_PLUGINS, bsdf_instance, polarization_warnings, split_leaves
 from .camera import camera_uniforms
-from .colors import encode_texels, spectrum_value
+from .colors import spectrum_value
 from .emitters import KINDS as EMITTER_KINDS
 from .emitters import EmitterTables, emitter_tables
 from .film import develop, film_reach, film_uniforms, new_accumulator
@@ -143,7 +143,7 @@ def flatten(desc: Any, triangulate: bool = False, variant: str = "rgb"
                         cat(F, np.int32), cat(G, np.int32),
                         emitter_tables(desc, lights, len(emitters), analytic_lights, variant),
                         meshes)
-    bufs.T, bufs.textures = encode_texels(textures.buffer(), variant), textures.instances
+    bufs.T, bufs.textures = textures.buffer(variant), textures.instances
     return bufs, bsdfs, emitters
 
 

@@ -3,8 +3,11 @@ buffer.
 
 A texture that sets a BSDF parameter becomes a :class:`TextureRef` in that BSDF's instance;
 the texture itself is an :class:`Instance` of the stdlib plugin (``stdlib/texture/``).  The
-texels of every bitmap are concatenated into ``T`` (3 float32 per texel, linear RGB, rows
-top to bottom), each bitmap's offset, width and height being constants of its instance.
+texels of every bitmap are concatenated into ``T`` (3 float32 per texel, rows top to bottom),
+each bitmap's offset, width and height being constants of its instance.  A texture that
+sets a colour stores them as the variant stores colours (runtime/render/colors.py); one that
+sets a Float parameter (``alpha``...) is a separate instance whose texels stay linear RGB,
+which its ``eval_1`` reads (Mitsuba's single-channel lookup: their luminance).
 Lookups, filtering and wrapping happen in rdsl (``stdlib/texture/bitmap.rdsl``); Python only
 decodes the images, as Mitsuba does when it loads them: 8-bit (and 16-bit) PNG and JPEG
 images are sRGB-encoded and are linearized unless ``raw`` is set, EXR images are linear.
@@ -19,7 +22,7 @@ import numpy as np
 
 from ...compiler.diagnostics import CompileError
 from ...compiler.passes.specialize import Instance, TextureRef
-from .colors import spectrum_value
+from .colors import encode_texels, spectrum_value
 
 # Mitsuba plugin -> rdsl file under stdlib/
 TEXTURE_PLUGINS = {"bitmap": "texture.bitmap", "checkerboard": "texture.checkerboard"}
@@ -83,26 +86,31 @@ class TextureTable:
 
     def __init__(self) -> None:
         self.instances: list[Instance] = []
-        self._ids: dict[int, tuple[Any, int]] = {}  # id(plugin) -> (plugin, index)
-        self._images: dict[tuple[str, bool], tuple[int, int, int, np.ndarray]] = {}
-        self._texels: list[np.ndarray] = []
+        # (id(plugin), scalar) -> (plugin, index)
+        self._ids: dict[tuple[int, bool], tuple[Any, int]] = {}
+        self._images: dict[tuple[str, bool, bool], tuple[int, int, int, np.ndarray]] = {}
+        self._texels: list[tuple[np.ndarray, bool]] = []  # (texels, colour: encoded)
         self._count = 0
 
-    def ref(self, plugin: Any, what: str) -> TextureRef:
-        """The reference for texture ``plugin`` (``what``: the parameter it sets)."""
-        key = id(plugin)
+    def ref(self, plugin: Any, what: str, scalar: bool = False) -> TextureRef:
+        """The reference for texture ``plugin`` (``what``: the parameter it sets, a Float
+        one when ``scalar``)."""
+        key = (id(plugin), scalar)
         if key not in self._ids:
             self._ids[key] = (plugin, len(self.instances))
-            self.instances.append(self._instance(plugin, what))
+            self.instances.append(self._instance(plugin, what, scalar))
         return TextureRef(self._ids[key][1])
 
-    def buffer(self) -> np.ndarray:
-        """``T``: every bitmap's texels (never empty, so the kernels get a valid pointer)."""
+    def buffer(self, variant: str = "rgb") -> np.ndarray:
+        """``T``: every bitmap's texels, those of colour textures as ``variant`` stores
+        colours (never empty, so the kernels get a valid pointer)."""
         if not self._texels:
             return np.zeros(3, np.float32)
-        return np.ascontiguousarray(np.concatenate(self._texels), np.float32)
+        return np.ascontiguousarray(np.concatenate(
+            [encode_texels(t, variant) if colour else t for t, colour in self._texels]),
+            np.float32)
 
-    def _instance(self, plugin: Any, what: str) -> Instance:
+    def _instance(self, plugin: Any, what: str, scalar: bool = False) -> Instance:
         p = plugin.params
         name = plugin.id or plugin.type
         if plugin.type not in TEXTURE_PLUGINS:
@@ -117,16 +125,17 @@ class TextureTable:
                     raise CompileError(f"checkerboard.{c}: textures of textures are not "
                                        "supported by the renderer yet", plugin.loc)
                 params[c] = spectrum_value(p[c], f"checkerboard.{c}", loc=plugin.loc)
+                params["rgb" + c[-1]] = tuple(float(x) for x in rgb)  # for eval_1
         else:
-            offset, w, h, mean = self._image(p["filename"], bool(p["raw"]), plugin)
+            offset, w, h, mean = self._image(p["filename"], bool(p["raw"]), plugin, scalar)
             params.update(offset=offset, width=w, height=h, average=mean,
                           filter=BITMAP_FILTERS[p["filter_type"]],
                           wrap=BITMAP_WRAPS[p["wrap_mode"]])
         return Instance(plugin.type, params, name)
 
-    def _image(self, filename: str, raw: bool, plugin: Any
+    def _image(self, filename: str, raw: bool, plugin: Any, scalar: bool = False
                ) -> tuple[int, int, int, tuple[float, ...]]:
-        key = (str(Path(filename).resolve()), raw)
+        key = (str(Path(filename).resolve()), raw, scalar)
         if key not in self._images:
             try:
                 img = load_bitmap(filename, raw)
@@ -136,7 +145,7 @@ class TextureTable:
             h, w = img.shape[:2]
             mean = tuple(float(x) for x in img.reshape(-1, 3).mean(axis=0))
             self._images[key] = (self._count, w, h, mean)
-            self._texels.append(img.reshape(-1))
+            self._texels.append((img.reshape(-1), not scalar))
             self._count += w * h
         offset, w, h, mean = self._images[key]
         return offset, w, h, mean
