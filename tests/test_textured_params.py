@@ -156,3 +156,87 @@ def test_textures_where_they_cannot_go_are_clear_errors(tmp_path, bsdf, words):
     with pytest.raises(CompileError, match=words) as e:
         load_scene(path).compile()
     assert "scene.xml" in str(e.value)
+
+
+# ---- an area emitter's radiance from a texture ------------------------------------------
+
+L0, L1 = np.array([4.0, 1.0, 0.5]), np.array([0.5, 2.0, 6.0])  # above 1: stored scaled
+
+
+def radiance_bitmap(tmp_path: Path) -> str:
+    write_exr(tmp_path / "radiance.exr", np.array([[L0, L1], [L1, L0]], np.float32))
+    return ('<texture type="bitmap" name="radiance"><string name="filename" '
+            f'value="{tmp_path / "radiance.exr"}"/><string name="filter_type" '
+            'value="nearest"/></texture>')
+
+
+def emitter_plane(radiance: str) -> str:
+    return (f'<shape type="rectangle"><bsdf type="diffuse"><rgb name="reflectance" '
+            f'value="0"/></bsdf><emitter type="area">{radiance}</emitter></shape>')
+
+
+def rgb(name: str, c: np.ndarray) -> str:
+    return f'<rgb name="{name}" value="{", ".join(map(str, c))}"/>'
+
+
+@pytest.mark.parametrize("variant", ["rgb", "spectral"])
+def test_textured_radiance_seen_directly(tmp_path, variant):
+    a, b = (render(tmp_path, emitter_plane(rgb("radiance", c)), variant, emitters="")
+            for c in (L0, L1))
+    textures = [checker("radiance", L0, L1)]
+    if variant == "rgb":  # spectral fits a scaled image's texels, not each colour alone
+        textures.append(radiance_bitmap(tmp_path))
+    for tex in textures:
+        assert_regions(render(tmp_path, emitter_plane(tex), variant, emitters=""), a, b)
+
+
+# the receiving point under a pinhole camera, below the emitter (the rectangle [-1, 1]^2
+# turned to face down at height 1: its checker colour 0 covers the world quadrants where
+# the signs of x and y differ, colour 1 the others)
+X0, Y0 = 0.5, 0.3
+
+
+def _irradiance_corner(a: float, b: float) -> float:
+    """Irradiance under a corner of a unit-radiance rectangle [0, a] x [0, b] at height 1."""
+    ha, hb = math.hypot(a, 1.0), math.hypot(b, 1.0)
+    return 0.5 * (a / ha * math.atan(b / ha) + b / hb * math.atan(a / hb))
+
+
+def _irradiance(x1: float, x2: float, y1: float, y2: float) -> float:
+    """... of the rectangle [x1, x2] x [y1, y2] at height 1 over (X0, Y0), from its corners."""
+    def g(x: float, y: float) -> float:
+        return math.copysign(1, x) * math.copysign(1, y) * _irradiance_corner(abs(x), abs(y))
+    x1, x2, y1, y2 = x1 - X0, x2 - X0, y1 - Y0, y2 - Y0
+    return g(x2, y2) - g(x1, y2) - g(x2, y1) + g(x1, y1)
+
+
+@pytest.mark.parametrize("variant", ["mono", "rgb", "spectral"])
+def test_textured_radiance_lights_a_plane(tmp_path, variant):
+    """Emitter sampling and BSDF sampling both look the radiance up at the uv of the point
+    they reach: the plane's brightness is the analytic sum over the checker's regions."""
+    from test_envmap_variants import film_value
+
+    light = (f'<shape type="rectangle"><transform name="to_world"><rotate x="1" angle="180"/>'
+             f'<translate z="1"/></transform><emitter type="area">'
+             f'{radiance_bitmap(tmp_path)}</emitter></shape>')
+    floor = ('<shape type="rectangle"><transform name="to_world"><scale value="10"/>'
+             '</transform><bsdf type="diffuse"><rgb name="reflectance" value="0.5"/></bsdf>'
+             '</shape>')
+    xml = f"""<scene version="3.0.0">
+  <integrator type="path"><integer name="max_depth" value="2"/></integrator>
+  <sensor type="perspective"><float name="fov" value="1"/>
+    <transform name="to_world"><lookat origin="{X0},{Y0},0.5" target="{X0},{Y0},0"
+      up="0,1,0"/></transform>
+    <sampler type="independent"><integer name="sample_count" value="4096"/></sampler>
+    <film type="hdrfilm"><integer name="width" value="4"/><integer name="height" value="4"/>
+      <rfilter type="box"/></film></sensor>
+  {floor}{light}
+</scene>"""
+    path = tmp_path / "lit.xml"
+    path.write_text(xml)
+    scene = load_scene(path, variant=variant)
+    got = scene.render(seed=2).mean(axis=(0, 1))
+    e0 = _irradiance(0, 1, -1, 0) + _irradiance(-1, 0, 0, 1)
+    e1 = _irradiance(0, 1, 0, 1) + _irradiance(-1, 0, -1, 0)
+    expected = 0.5 / math.pi * (e0 * film_value(L0, variant) + e1 * film_value(L1, variant))
+    np.testing.assert_allclose(got, expected, rtol=1.5e-2)

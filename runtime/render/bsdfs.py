@@ -90,7 +90,7 @@ def _value(plugin: Any, name: str, value: Any, textures: Any) -> Any:
             raise CompileError(f"{_where(plugin)}: a texture for `{name}` is not supported by "
                                "the renderer yet", plugin.loc)
         # a Float parameter (a roughness) reads the texture's one-value lookup
-        return textures.ref(value, what, scalar=kind == "Float")
+        return textures.ref(value, what, "scalar" if kind == "Float" else "colour")
     if getattr(value, "rgb", None) is not None:
         return spectrum_value(value, what, loc=plugin.loc)
     if isinstance(value, (bool, int, float)):
