@@ -218,9 +218,9 @@ def _flatten(plugin: Any, above: float, below: float, mirror: bool, in_twosided:
         null[0] += above * (1 - o)
         null[1] += below * (1 - o)
         _flatten(kids[0], above * o, below * o, mirror, in_twosided, terms, null)
-    elif len(kids) == 1:  # twosided(x): from below, x sees mirrored directions
-        _flatten(kids[0], above, below, True, True, terms, null)
-    elif mirror:  # twosided(x, y) already seen from its front side: x only
+    elif len(kids) == 1 or mirror:
+        # twosided(x): from below, x sees mirrored directions; a twosided(x, y) already
+        # turned to its front side sees x only
         _flatten(kids[0], above, below, True, True, terms, null)
     else:  # twosided(x, y): x from above, y from below (mirrored)
         _flatten(kids[0], above, 0.0, True, True, terms, null)
