@@ -90,12 +90,12 @@ def test_tabulated_spectrum_is_interpolated():
     src = """
     import spectral;
     import render.scene;
-    fn k(u: Float) -> Vec4 {
+    fn k(u: Float, T: [Float]) -> Vec4 {
         let w = sample_wavelengths(u);
         var out = Vec4(0.0);
         let s = Surface { p: Vec3(0.0), n: Vec3(0.0, 0.0, 1.0), sh_n: Vec3(0.0, 0.0, 1.0),
                           uv: Vec2(0.0, 0.0), wi: Vec3(0.0, 0.0, 1.0), t: 1.0, valid: true };
-        let e = scene_emitter_eval(0, s);
+        let e = scene_emitter_eval(0, s, T);
         if const spectral {
             let l = wavelengths();
             out = Vec4(max_value(l), max_value(e), mean(l), mean(e));
@@ -105,7 +105,8 @@ def test_tabulated_spectrum_is_interpolated():
     """
     scene = SceneSpec(emitters=[Instance("area", {"radiance": value})])
     src = "import emitter.area;\n" + src
-    got = rdsl.jit(src, target="avx2", variant="spectral", scene=scene).k(U)
+    got = rdsl.jit(src, target="avx2", variant="spectral", scene=scene).k(
+        U, np.zeros(3, np.float32))
     lam, _ = S.sample_wavelengths(U.astype(np.float64))
     grid = S.LAMBDA_MIN + 5.0 * np.arange(S.CIE_SAMPLES)
     spec = np.interp(lam, grid, S.resample(wl, vals))

@@ -5,7 +5,7 @@ A constant colour parameter reaches the compiler as a
 spectrum if it gave one, and whether it is emitted light); the compiler upsamples it.  Colours
 the kernels read from buffers (emitter tables, bitmap texels) are stored already encoded:
 linear sRGB in the mono and rgb variants, Jakob & Hanika coefficients in the spectral one
-(see compiler/passes/lift.py).
+(see compiler/passes/lift.py), and for emitted light a scale beside them.
 """
 
 from __future__ import annotations
@@ -60,3 +60,18 @@ def encode_texels(texels: np.ndarray, variant: str) -> np.ndarray:
     shape = texels.shape
     return np.asarray(rgb_to_coeffs(np.asarray(texels, np.float64).reshape(-1, 3)),
                       np.float32).reshape(shape)
+
+
+def emission_texels(rgb: np.ndarray, variant: str) -> np.ndarray:
+    """Emitted colours (n, 3) as an environment map's texels store them: 4 floats each,
+    read by ``illuminant(c0, c1, c2)`` and a scale (linear sRGB and 1 in mono and rgb;
+    coefficients of ``rgb / scale`` and ``scale = 2 max(rgb)`` in spectral, as Mitsuba's
+    envmap)."""
+    rgb = np.asarray(rgb, np.float64).reshape(-1, 3)
+    if variant.removesuffix("_polarized") != "spectral":
+        return np.concatenate([rgb, np.ones((len(rgb), 1))], axis=1)
+    from ..spectral import illuminant_from_rgb
+
+    coeffs, scale = illuminant_from_rgb(rgb)
+    return np.concatenate([np.asarray(coeffs, np.float64).reshape(-1, 3),
+                           np.asarray(scale, np.float64).reshape(-1, 1)], axis=1)

@@ -29,7 +29,7 @@ from ...compiler.passes.specialize import (
 from ..scene import load_scene_description
 from .bsdfs import BSDF_PLUGINS, bsdf_instance, polarization_warnings, split_leaves
 from .camera import camera_uniforms
-from .colors import encode_texels, spectrum_value
+from .colors import spectrum_value
 from .emitters import KINDS as EMITTER_KINDS
 from .emitters import EmitterTables, emitter_tables
 from .film import develop, film_reach, film_uniforms, new_accumulator
@@ -105,7 +105,7 @@ def flatten(desc: Any, triangulate: bool = False, variant: str = "rgb"
         emitter = -1
         if shape.emitter is not None:
             emitter = len(emitters)
-            emitters.append(_area_instance(shape.emitter))
+            emitters.append(_area_instance(shape.emitter, textures))
         analytic = None if triangulate else shape.analytic
         if analytic is not None:  # G's first entry is set below, with the records
             meshes.append(user_geometry(analytic))
@@ -155,7 +155,7 @@ def flatten(desc: Any, triangulate: bool = False, variant: str = "rgb"
                         cat(F, np.int32), cat(G, np.int32),
                         emitter_tables(desc, lights, len(emitters), analytic_lights, variant),
                         meshes)
-    bufs.T, bufs.textures = encode_texels(textures.buffer(), variant), textures.instances
+    bufs.T, bufs.textures = textures.buffer(variant), textures.instances
     return bufs, bsdfs, emitters
 
 
@@ -164,12 +164,16 @@ def _shape_kind(flags: int) -> int:
     return next((SHAPE_KINDS[k] for k, bit in SHAPE_FLAGS.items() if flags & bit), 0)
 
 
-def _area_instance(em: Any) -> Instance:
-    """The ``area`` emitter instance of an emissive shape."""
+def _area_instance(em: Any, textures: TextureTable) -> Instance:
+    """The ``area`` emitter instance of an emissive shape; its radiance may be a texture."""
     if em.type not in EMITTER_PLUGINS:
         raise CompileError(f"emitter `{em.type}` is not supported by the renderer yet", em.loc)
+    radiance = em.params["radiance"]
+    if getattr(radiance, "category", None) == "texture":
+        return Instance(em.type, {"radiance": textures.ref(radiance, "area.radiance",
+                                                           "emitted")})
     return Instance(em.type, {"radiance": spectrum_value(
-        em.params["radiance"], "area.radiance", illuminant=True, loc=em.loc)})
+        radiance, "area.radiance", illuminant=True, loc=em.loc)})
 
 
 def _literal(value: Any, struct: str | None = None) -> str:
