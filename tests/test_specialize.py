@@ -64,3 +64,51 @@ def test_dispatch_matches_the_plugins_own_kernels(target):
                  own_d["diffuse.eval"](si, wo, reflectance=(0.1, 0.7, 0.2))))
     np.testing.assert_allclose(got, want, rtol=1e-6, atol=1e-7)
     assert np.any(got > 0)
+
+
+def test_emitter_sampling_disappears_when_every_bsdf_is_delta(tmp_path):
+    """With only smooth conductors and dielectrics, a BSDF evaluates to 0 for any sampled
+    light direction: the specialized kernel has no shadow ray (one strategy, no MIS)."""
+    from pathlib import Path
+
+    from rdsl.compiler import driver
+
+    cbox = Path(__file__).resolve().parents[2] / "shared" / "scenes" / "cbox" / "cbox.xml"
+    if not cbox.is_file():
+        pytest.skip(f"{cbox} is not present")
+    pytest.importorskip("rdsl.runtime.embree")
+    src = cbox.read_text()
+    for name in ("white", "green", "red"):
+        start = src.index(f'<bsdf type="diffuse" id="{name}">')
+        end = src.index("</bsdf>", start) + len("</bsdf>")
+        plugin = "dielectric" if name == "green" else "conductor"
+        src = src[:start] + f'<bsdf type="{plugin}" id="{name}"/>' + src[end:]
+    (tmp_path / "delta.xml").write_text(src)
+
+    def shadow_rays(path: Path) -> int:
+        s = rdsl.load_scene(path, variant="rgb", target="scalar")
+        s.compile()
+        mod, _ = driver.compile_kernels(s.kernel_src, target="scalar", variant="rgb",
+                                        scene=s.scene_spec)
+        return sum(i.op is Op.OCCLUDED for i in mod.functions["render_sample"].walk())
+
+    assert shadow_rays(cbox) == 1
+    assert shadow_rays(tmp_path / "delta.xml") == 0
+
+
+def test_an_if_giving_the_same_value_on_both_sides_folds():
+    src = """
+    fn k(x: Float, c: Bool) -> Float {
+        var y = 0.0;
+        var z = x;
+        if c { y = 0.0; z = x; } else { y = 0.0 * 1.0; }
+        return y + z;
+    }
+    """
+    m = frontend(src)
+    from rdsl.compiler.passes.optimize import Optimize
+
+    run_passes(m, [Inline(), Optimize()])
+    assert not any(i.op is Op.IF for i in m.functions["k"].walk())
+    got = rdsl.jit(src, target="scalar").k(np.float32([1.5, -2.0]), np.array([True, False]))
+    np.testing.assert_array_equal(got, [1.5, -2.0])

@@ -108,6 +108,7 @@ class _Simplifier:
                     continue
                 for r in ins.regions:
                     self.block(r)
+                out.extend(self.same_on_both_sides(ins))
             elif ins.op is Op.LOOP:
                 peeled = None if self.speculating else self.peel(ins)
                 if peeled is not None:
@@ -160,6 +161,31 @@ class _Simplifier:
             except (InterpError, TypeError, ValueError, OverflowError):
                 pass
         return True
+
+    def same_on_both_sides(self, ins: Instr) -> list[Instr]:
+        """Results of ``ins`` (an ``if``) that both branches give alike -- the same outer
+        value, or equal scalar constants -- are replaced by that value; returns the constants
+        to place before ``ins``.  (A scene whose BSDFs all evaluate to 0 loses its emitter
+        sampling this way: its dispatch yields 0 on every side.)"""
+        if len(ins.regions) != 2:
+            return []
+        new: list[Instr] = []
+        for k, r in enumerate(ins.results):
+            a, b = (self.find(reg.instrs[-1].operands[k]) for reg in ins.regions)
+            if a is b:
+                self.repl[r] = a
+                self.changed = True
+                continue
+            ca, cb = self.consts.get(a), self.consts.get(b)
+            if ca is None or cb is None or not _is_scalar(r.type) \
+                    or repr(ca) != repr(cb) or type(ca) is not type(cb):
+                continue
+            c = Instr(Op.CONST, [], [r.type], dict(a.owner.attrs), loc=ins.loc)
+            self.consts[c.result] = ca
+            self.repl[r] = c.result
+            self.changed = True
+            new.append(c)
+        return new
 
     def make_const(self, ins: Instr, val: Any) -> bool:
         attr = _to_attr(val, ins.result.type)
