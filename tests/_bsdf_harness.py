@@ -16,7 +16,9 @@ int_ior=1.33)``, with Python values for the parameters:
 * colour results are the intensity, (n,) in mono, (n, 3) rgb, (n, 4) spectral, the entry
   [0][0] of the Mueller matrix in polarized variants; a sample() result then also holds
   ``mueller`` (n, 4, 4) or (n, 4, 4, 4) (row, column, wavelength), and eval() gives it with
-  ``mueller=True``.
+  ``mueller=True``;
+* :meth:`Harness.disperses` is the BSDF's ``disperses()`` (false when it has none): the path
+  integrator then multiplies its throughput by (4, 0, 0, 0) once (stdlib/dispersion.rdsl).
 """
 
 from __future__ import annotations
@@ -50,6 +52,10 @@ fn h_eval(id: Int, si: Surface, wo: Vec3, ul: Float, T: [Float]) -> Spectrum {{
 fn h_pdf(id: Int, si: Surface, wo: Vec3, ul: Float, T: [Float]) -> Float {{
     let w = sample_wavelengths(ul);
     return scene_bsdf_pdf(id, si, wo, T);
+}}
+fn h_disperses(id: Int, ul: Float, T: [Float]) -> Bool {{
+    let w = sample_wavelengths(ul);
+    return scene_bsdf_disperses(id, T);
 }}
 fn entry(s: Spectrum, e: Spectrum) -> Float {{ return mean(unpolarized(s * e)) * 4.0; }}
 fn h_wavelengths(ul: Float) -> Vec4 {{
@@ -153,6 +159,10 @@ class Harness:
 
     def pdf(self, si: dict, wo: np.ndarray, ul: Any = None, **params: Any) -> np.ndarray:
         return np.asarray(self._call("h_pdf", len(wo), [si, wo], ul, params))
+
+    def disperses(self, **params: Any) -> bool:
+        """Whether the integrator follows the hero wavelength alone after this BSDF."""
+        return bool(np.asarray(self._call("h_disperses", 1, [], None, params))[0])
 
     def wavelengths(self, n: int, ul: Any = None) -> np.ndarray | None:
         """The wavelengths (nm) of n rows, (n, 4); None outside spectral variants."""
