@@ -63,7 +63,7 @@ def hero_eta(mod: Harness, n: int, ul=None, a=A, b=B) -> np.ndarray:
 def test_snell_per_wavelength(mods, variant, theta):
     mod, n = mods("dielectric", variant), 100_000
     wi = wi_at(theta)
-    si, bs = sample(mod, "dielectric", wi, n, rng("snell", variant, theta), int_cauchy_b=B)
+    _, bs = sample(mod, "dielectric", wi, n, rng("snell", variant, theta), int_cauchy_b=B)
     eta = hero_eta(mod, n)
     eta_it = eta if wi[2] > 0 else 1 / eta
     f = fresnel_np(wi[2], eta)
