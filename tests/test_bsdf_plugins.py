@@ -348,7 +348,7 @@ def test_colour_in_every_variant(mods, variant):
     luminance in mono, the Jakob & Hanika spectrum at each row's wavelengths (numpy's model,
     rdsl.runtime.spectral) in spectral variants; the intensity entry in polarized ones."""
     mod, n, rgb = mods("diffuse", variant), 2000, (0.8, 0.5, 0.2)
-    si, bs = sample(mod, "diffuse", wi_at(0.7), n, rng("colour", variant), reflectance=rgb)
+    _, bs = sample(mod, "diffuse", wi_at(0.7), n, rng("colour", variant), reflectance=rgb)
     want = colour_at(variant, rgb, mod.wavelengths(n))
     np.testing.assert_allclose(bs["weight"], np.broadcast_to(want, bs["weight"].shape),
                                rtol=2e-5, atol=1e-6)
