@@ -31,9 +31,12 @@ from typing import Any
 import numpy as np
 import rdsl
 from rdsl.compiler.passes.specialize import Instance, SceneSpec, SpectrumValue, parameter_slots
+from rdsl.runtime import spectral as S
 
 VARIANTS = ("mono", "rgb", "spectral", "mono_polarized", "spectral_polarized")
 STDLIB = Path(rdsl.__file__).resolve().parent / "stdlib"
+IOR_DIR = STDLIB / "data" / "ior"
+LUMINANCE = np.array([0.212671, 0.715160, 0.072169])  # CIE Y of the linear sRGB primaries
 f32 = np.float32
 _GOLDEN = 0.6180339887498949
 
@@ -177,3 +180,26 @@ class Harness:
         if plugin != self.name or method not in ("sample", "eval", "pdf"):
             raise KeyError(key)
         return getattr(self, method)
+
+
+# ---------------------------------------------------------------------- colours per variant
+
+def ior_table(name: str) -> tuple[tuple[float, ...], tuple[float, ...]]:
+    """A tabulated spectrum of stdlib/data/ior (wavelengths in nm, values)."""
+    rows = [ln.split() for ln in (IOR_DIR / name).read_text().splitlines()
+            if ln.strip() and not ln.startswith("#")]
+    return tuple(float(r[0]) for r in rows), tuple(float(r[1]) for r in rows)
+
+
+def colour_at(variant: str, value: Any, wavelengths: np.ndarray | None) -> np.ndarray:
+    """What a colour parameter is per row and channel in `variant` (an independent numpy
+    model): RGB, its luminance (mono), or its spectrum at the rows' wavelengths."""
+    if isinstance(value, SpectrumValue) and value.samples is not None and wavelengths is not None:
+        grid = S.LAMBDA_MIN + 5.0 * np.arange(S.CIE_SAMPLES)
+        return np.interp(wavelengths, grid, S.resample(*map(np.asarray, value.samples)))
+    rgb = np.asarray(value.rgb if isinstance(value, SpectrumValue) else value, np.float64)
+    if variant.startswith("mono"):
+        return np.atleast_1d(rgb @ LUMINANCE)[None, :]
+    if wavelengths is None:
+        return rgb[None, :]
+    return S.eval_coeffs(S.rgb_to_coeffs(rgb), wavelengths)

@@ -35,10 +35,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 import rdsl
-from _bsdf_harness import VARIANTS, Harness
+from _bsdf_harness import VARIANTS, Harness, colour_at, ior_table
+from _chi2 import beckmann_g1_exact, beckmann_g1_fit, chi2_directions
 from rdsl.compiler.passes.specialize import SpectrumValue
-from rdsl.runtime import spectral as S
-from scipy import stats
 
 BSDF_DIR = Path(__file__).resolve().parents[1] / "stdlib" / "bsdf"
 PLUGINS = ["diffuse", "roughconductor", "conductor", "dielectric", "thindielectric",
@@ -46,9 +45,7 @@ PLUGINS = ["diffuse", "roughconductor", "conductor", "dielectric", "thindielectr
 f32 = np.float32
 P_MIN = 1e-3
 GOLD = {"eta": (0.143, 0.374, 1.442), "k": (3.983, 2.385, 1.603)}  # Au, roughly, in RGB
-IOR_DIR = BSDF_DIR.parent / "data" / "ior"
 OTHERS = [v for v in VARIANTS if v != "rgb"]  # the variants that run the reduced grids
-LUMINANCE = np.array([0.212671, 0.715160, 0.072169])
 THETAS = [0.3, 1.0, 1.45]          # incident angles; 1.45 rad = 83 degrees: near grazing
 ALPHAS = [0.05, 0.3, 0.7]
 
@@ -65,32 +62,12 @@ def mods():
     return get
 
 
-def _table(name: str) -> tuple[tuple[float, ...], tuple[float, ...]]:
-    rows = [ln.split() for ln in (IOR_DIR / name).read_text().splitlines()
-            if ln.strip() and not ln.startswith("#")]
-    return tuple(float(r[0]) for r in rows), tuple(float(r[1]) for r in rows)
-
-
 def gold(variant: str) -> dict:
     """Gold's complex IOR as a scene gives it: RGB in mono and rgb, the tabulated spectra
     (stdlib/data/ior/Au.*.spd, as `material="Au"`) in the spectral variants."""
     if variant.removesuffix("_polarized") != "spectral":
         return GOLD
-    return {k: SpectrumValue(GOLD[k], _table(f"Au.{k}.spd")) for k in ("eta", "k")}
-
-
-def colour_at(variant: str, value, wavelengths) -> np.ndarray:
-    """What a colour parameter is per row and channel in `variant` (an independent numpy
-    model): RGB, its luminance (mono), or its spectrum at the rows' wavelengths."""
-    if isinstance(value, SpectrumValue) and value.samples is not None and wavelengths is not None:
-        grid = S.LAMBDA_MIN + 5.0 * np.arange(S.CIE_SAMPLES)
-        return np.interp(wavelengths, grid, S.resample(*map(np.asarray, value.samples)))
-    rgb = np.asarray(value.rgb if isinstance(value, SpectrumValue) else value, np.float64)
-    if variant.startswith("mono"):
-        return np.atleast_1d(rgb @ LUMINANCE)[None, :]
-    if wavelengths is None:
-        return rgb[None, :]
-    return S.eval_coeffs(S.rgb_to_coeffs(rgb), wavelengths)
+    return {k: SpectrumValue(GOLD[k], ior_table(f"Au.{k}.spd")) for k in ("eta", "k")}
 
 
 def in_variant(params: dict, variant: str) -> dict:
@@ -153,107 +130,6 @@ def fresnel_np(cos_i, eta):
     rs = (c - eta * ct) / (c + eta * ct)
     rp = (eta * c - ct) / (eta * c + ct)
     return np.where(s2t >= 1, 1.0, 0.5 * (rs * rs + rp * rp))
-
-
-# ---------------------------------------------------------------------------- chi-square
-
-_GL_X, _GL_W = np.polynomial.legendre.leggauss(5)
-
-
-def _gl_rects(pdf, rects):
-    """5 x 5 Gauss-Legendre integral of pdf over (cos theta, phi) rectangles (M, 4)."""
-    c0, c1, p0, p1 = rects.T
-    hc, hp = 0.5 * (c1 - c0), 0.5 * (p1 - p0)
-    cs = (0.5 * (c0 + c1))[:, None] + hc[:, None] * _GL_X[None, :]          # (M, 5)
-    ps = (0.5 * (p0 + p1))[:, None] + hp[:, None] * _GL_X[None, :]
-    C = np.broadcast_to(cs[:, :, None], (len(rects), 5, 5))
-    P = np.broadcast_to(ps[:, None, :], (len(rects), 5, 5))
-    st = np.sqrt(np.maximum(1 - C * C, 0))
-    d = np.stack([st * np.cos(P), st * np.sin(P), C], -1).reshape(-1, 3).astype(f32)
-    v = pdf(d).reshape(len(rects), 5, 5)
-    assert np.all(np.isfinite(v)) and np.all(v >= 0)
-    return np.einsum("mij,i,j->m", v, _GL_W, _GL_W) * hc * hp
-
-
-def _split(rects):
-    c0, c1, p0, p1 = rects.T
-    cm, pm = 0.5 * (c0 + c1), 0.5 * (p0 + p1)
-    kids = [np.stack(r, -1) for r in ((c0, cm, p0, pm), (cm, c1, p0, pm),
-                                      (c0, cm, pm, p1), (cm, c1, pm, p1))]
-    return np.stack(kids, 1).reshape(-1, 4)
-
-
-def integrate_bins(pdf, cos_edges, phi_edges, n, max_depth=7):
-    """Probability of each (cos theta, phi) bin: adaptive (2x2-split) Gauss-Legendre
-    quadrature until the estimate moves by < 0.05 sqrt(p / n), i.e. well below the sampling
-    noise of n samples."""
-    C0, P0 = np.meshgrid(cos_edges[:-1], phi_edges[:-1], indexing="ij")
-    C1, P1 = np.meshgrid(cos_edges[1:], phi_edges[1:], indexing="ij")
-    rects = np.stack([C0.ravel(), C1.ravel(), P0.ravel(), P1.ravel()], -1)
-    owner = np.arange(len(rects))
-    out = np.zeros(len(rects))
-    coarse = _gl_rects(pdf, rects)
-    for depth in range(max_depth + 1):
-        kids = _split(rects)
-        fine4 = _gl_rects(pdf, kids).reshape(-1, 4)
-        fine = fine4.sum(1)
-        tol = 0.05 * np.sqrt(np.maximum(fine, 1.0 / n) / n) * 4.0 ** -depth
-        done = (np.abs(fine - coarse) <= tol) | (depth == max_depth)
-        np.add.at(out, owner[done], fine[done])
-        keep = ~done
-        rects = kids.reshape(-1, 4, 4)[keep].reshape(-1, 4)
-        coarse = fine4[keep].ravel()
-        owner = np.repeat(owner[keep], 4)
-        if len(rects) == 0:
-            break
-    return out.reshape(len(cos_edges) - 1, len(phi_edges) - 1)
-
-
-def chi2_pvalue(observed, expected, min_expected=5.0):
-    """Pearson's chi-square p-value, the cells with expected < min_expected pooled."""
-    observed, expected = np.ravel(observed), np.ravel(expected)
-    sparse = expected < min_expected
-    obs = np.append(observed[~sparse], observed[sparse].sum())
-    exp = np.append(expected[~sparse], expected[sparse].sum())
-    keep = exp > 0
-    assert np.all(obs[~keep] == 0), "samples where pdf() is 0"
-    if keep.sum() < 2:
-        return 1.0
-    stat = float(np.sum((obs[keep] - exp[keep]) ** 2 / exp[keep]))
-    return float(stats.chi2.sf(stat, int(keep.sum()) - 1))
-
-
-def chi2_directions(wo, valid, pdf, n, delta_obs=(), delta_prob=(), res=(40, 40),
-                    lower=True):
-    """p-value of the valid sampled directions (and the discrete lobes) against pdf()."""
-    cos_edges = np.linspace(-1 if lower else 0, 1, res[0] + 1)
-    phi_edges = np.linspace(-np.pi, np.pi, res[1] + 1)
-    d = wo[valid].astype(np.float64)
-    d /= np.linalg.norm(d, axis=1, keepdims=True)
-    obs, _, _ = np.histogram2d(np.clip(d[:, 2], -1, 1), np.arctan2(d[:, 1], d[:, 0]),
-                               bins=[cos_edges, phi_edges])
-    exp = n * integrate_bins(pdf, cos_edges, phi_edges, n)
-    rest = n - exp.sum() - n * sum(delta_prob)
-    assert rest > -1e-3 * n, f"pdf() integrates to more than 1 ({exp.sum() / n:.4f})"
-    observed = np.concatenate([obs.ravel(), list(delta_obs), [n - valid.sum() - sum(delta_obs)]])
-    expected = np.concatenate([exp.ravel(), n * np.asarray(delta_prob, float), [max(rest, 0)]])
-    return chi2_pvalue(observed, expected)
-
-
-def beckmann_g1_exact(wi, alpha):
-    """Smith's G1 of the Beckmann distribution, exact (erf), for m = the normal."""
-    from scipy.special import erf
-    ct = abs(float(wi[2]))
-    a = ct / (alpha * np.sqrt(1 - ct * ct))
-    return 2 / (1 + erf(a) + np.exp(-a * a) / (a * np.sqrt(np.pi)))
-
-
-def beckmann_g1_fit(wi, alpha):
-    """The rational fit of Walter et al. 2007 that microfacet.rdsl (and Mitsuba) use."""
-    ct = abs(float(wi[2]))
-    a = ct / (alpha * np.sqrt(1 - ct * ct))
-    return 1.0 if a >= 1.6 else min((3.535 * a + 2.181 * a * a)
-                                    / (1 + 2.276 * a + 2.577 * a * a), 1.0)
 
 
 CHI2_CASES = (

@@ -24,9 +24,10 @@ import warnings
 import numpy as np
 import pytest
 from _bsdf_harness import VARIANTS, Harness
+from _chi2 import chi2_directions
 from rdsl.compiler.diagnostics import CompileError
 from rdsl.runtime import spectral as S
-from test_bsdf_plugins import chi2_directions, fresnel_np, pdf_fn, rng, sample, surface, tile, wi_at
+from test_bsdf_plugins import fresnel_np, pdf_fn, rng, sample, surface, tile, wi_at
 
 f32 = np.float32
 A, B, EXT = 1.5046, 0.00420, 1.000277  # BK7 (Cauchy's A and B in um^2), Mitsuba's air
