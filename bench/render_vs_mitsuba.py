@@ -4,7 +4,8 @@ same run, on the same machine.
     python bench/render_vs_mitsuba.py [SCENE.xml ...] [--spp 1 4 16 64 256] [--threads 2]
                                       [--target avx512] [--repeat 3] [--plot out/bench.png]
 
-For each spp it prints seconds (median of --repeat runs after a warm-up), paths/s and RMSE
+For each spp it prints seconds (median of --repeat runs after a warm-up; the two
+renderers take turns, so a shared machine's changing load hits both alike), paths/s and RMSE
 against the scene's reference EXR (`<scene>_ref_rgb.exr` beside it, else cbox's naming) for
 both renderers, and the ratio.  The equal-error time ratio assumes RMSE ~ 1/sqrt(time):
 ratio = (t_rdsl * rmse_rdsl^2) / (t_mitsuba * rmse_mitsuba^2); below 1 means rdsl reaches
@@ -19,6 +20,7 @@ import os
 import statistics
 import sys
 import time
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -35,31 +37,41 @@ def reference_for(scene: Path) -> Path | None:
     return None
 
 
-def median_time(fn, repeat: int) -> tuple[float, np.ndarray]:
-    img = fn(0)  # warm-up: compilation, caches, page faults
-    times = []
+def interleaved_medians(fns: dict[str, Callable[[int], np.ndarray]], repeat: int
+                        ) -> dict[str, tuple[float, float, np.ndarray]]:
+    """Median wall seconds, median CPU seconds (all the process's threads) and the last image
+    of each renderer in ``fns``, after a warm-up (compilation, caches, page faults).  The
+    renderers take turns, one run each per repeat, so a change in the machine's load (it is
+    shared) hits them alike; CPU seconds hardly change with the load at all."""
+    imgs = {name: fn(0) for name, fn in fns.items()}
+    times: dict[str, list[float]] = {name: [] for name in fns}
+    cpus: dict[str, list[float]] = {name: [] for name in fns}
     for k in range(repeat):
-        t = time.perf_counter()
-        img = fn(k + 1)
-        times.append(time.perf_counter() - t)
-    return statistics.median(times), img
+        for name, fn in fns.items():
+            t, c = time.perf_counter(), time.process_time()
+            imgs[name] = fn(k + 1)
+            times[name].append(time.perf_counter() - t)
+            cpus[name].append(time.process_time() - c)
+    return {name: (statistics.median(times[name]), statistics.median(cpus[name]), imgs[name])
+            for name in fns}
 
 
-def bench_rdsl(scene: Path, spps: list[int], threads: int, target: str, repeat: int):
+def rdsl_renderer(scene: Path, threads: int, target: str):
+    """The scene loaded and compiled by rdsl, the compile seconds, and a render function."""
     import rdsl
 
     s = rdsl.load_scene(scene, variant="rgb", target=target)
     t = time.perf_counter()
     s.compile()
     compile_s = time.perf_counter() - t
-    out = {}
-    for spp in spps:
-        out[spp] = median_time(lambda seed: s.render(spp=spp, seed=seed, threads=threads),
-                               repeat)
-    return out, compile_s, s
+
+    def render(spp: int, seed: int) -> np.ndarray:
+        return s.render(spp=spp, seed=seed, threads=threads)
+    return s, compile_s, render
 
 
-def bench_mitsuba(scene: Path, spps: list[int], threads: int, repeat: int):
+def mitsuba_renderer(scene: Path, threads: int):
+    """A render function of Mitsuba 3's ``llvm_ad_rgb`` variant, or None without it."""
     try:
         import drjit as dr
         import mitsuba as mi
@@ -71,13 +83,10 @@ def bench_mitsuba(scene: Path, spps: list[int], threads: int, repeat: int):
         return None
     dr.set_thread_count(threads)
     sc = mi.load_file(str(scene))
-    out = {}
-    for spp in spps:
-        def render(seed: int, spp=spp) -> np.ndarray:
-            img = mi.render(sc, spp=spp, seed=seed)
-            return np.array(img)  # forces evaluation
-        out[spp] = median_time(render, repeat)
-    return out
+
+    def render(spp: int, seed: int) -> np.ndarray:
+        return np.array(mi.render(sc, spp=spp, seed=seed))  # forces evaluation
+    return render
 
 
 def rmse(a: np.ndarray, b: np.ndarray) -> float:
@@ -99,32 +108,43 @@ def main() -> None:
     for scene in args.scenes:
         ref_path = reference_for(scene)
         ref = read_exr(ref_path)[..., :3] if ref_path else None
-        rd, compile_s, s = bench_rdsl(scene, args.spp, args.threads, args.target, args.repeat)
-        mi = bench_mitsuba(scene, args.spp, args.threads, args.repeat)
+        s, compile_s, rd_render = rdsl_renderer(scene, args.threads, args.target)
+        mi_render = mitsuba_renderer(scene, args.threads)
+        rd, mi = {}, {} if mi_render else None
+        for spp in args.spp:
+            fns = {"rdsl": lambda seed, spp=spp, r=rd_render: r(spp, seed)}
+            if mi_render:
+                fns["mitsuba"] = lambda seed, spp=spp, r=mi_render: r(spp, seed)
+            res = interleaved_medians(fns, args.repeat)
+            rd[spp] = res["rdsl"]
+            if mi_render:
+                mi[spp] = res["mitsuba"]
         npix = s.desc.sensor.film["width"] * s.desc.sensor.film["height"]
         print(f"\n{scene.name}: {args.threads} threads, rdsl target "
               f"{s.compile().target}, median of {args.repeat} runs; rdsl kernels "
               f"{'from cache' if s.from_cache else f'compiled in {compile_s:.2f} s'}")
         print(f"{'spp':>5} | {'rdsl s':>8} {'Mpath/s':>8} {'RMSE':>8} | {'mitsuba s':>9} "
-              f"{'Mpath/s':>8} {'RMSE':>8} | {'time ratio':>10} {'equal-error':>11}")
+              f"{'Mpath/s':>8} {'RMSE':>8} | {'time ratio':>10} {'equal-error':>11} "
+              f"{'cpu ratio':>9}")
         rows = []
         for spp in args.spp:
-            tr, ir = rd[spp]
+            tr, cr, ir = rd[spp]
             er = rmse(ir, ref) if ref is not None else float("nan")
             line = f"{spp:5d} | {tr:8.3f} {npix * spp / tr / 1e6:8.2f} {er:8.4f} |"
             if mi:
-                tm, im = mi[spp]
+                tm, cm, im = mi[spp]
                 em = rmse(im, ref) if ref is not None else float("nan")
                 eq = (tr * er * er) / (tm * em * em)
                 line += f" {tm:9.3f} {npix * spp / tm / 1e6:8.2f} {em:8.4f} | {tr / tm:10.2f} " \
-                        f"{eq:11.2f}"
+                        f"{eq:11.2f} {cr / cm:9.2f}"
                 rows.append((spp, tr, er, tm, em))
             else:
                 rows.append((spp, tr, er, None, None))
             print(line)
         curves[scene.name] = rows
     print("\ntime ratio = rdsl seconds / Mitsuba seconds at the same spp; equal-error = the "
-          "ratio of times to reach the same RMSE (below 1: rdsl is faster)")
+          "ratio of times to reach the same RMSE (below 1: rdsl is faster); cpu ratio = the "
+          "ratio of CPU seconds (all threads), which a loaded machine hardly changes")
     try:
         import matplotlib
 

@@ -62,7 +62,8 @@ def main() -> None:
     ap.add_argument("--threads", type=int, default=2)
     ap.add_argument("--target", default="host")
     ap.add_argument("--repeat", type=int, default=5)
-    ap.add_argument("--variants", nargs="+", default=["mono", "rgb", "spectral"])
+    ap.add_argument("--variants", nargs="+", default=["mono", "rgb", "spectral", "mono_polarized",
+                                                      "spectral_polarized"])
     args = ap.parse_args()
     if "rgb" not in args.variants:
         args.variants.insert(0, "rgb")

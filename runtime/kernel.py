@@ -11,7 +11,7 @@ import ctypes
 import math
 import numbers
 import os
-from concurrent.futures import ThreadPoolExecutor
+from concurrent.futures import Future, ThreadPoolExecutor
 from typing import Any
 
 import numpy as np
@@ -49,6 +49,22 @@ def _pool(threads: int) -> ThreadPoolExecutor:
         pool = _POOLS[threads] = ThreadPoolExecutor(max_workers=threads,
                                                     thread_name_prefix="rdsl")
     return pool
+
+
+class Pending:
+    """A kernel call running on the thread pool; ``result()`` waits for it and returns what
+    the call returns."""
+
+    def __init__(self, futures: list[Future], keep: Any, finish: Any) -> None:
+        self._futures = futures
+        self._keep = keep  # the arguments' buffers, alive until the call has run
+        self._finish = finish
+
+    def result(self) -> Any:
+        for f in self._futures:
+            f.result()
+        self._futures, self._keep = [], None
+        return self._finish()
 
 
 class Kernel:
@@ -214,13 +230,22 @@ class Kernel:
 
     # -- calling -------------------------------------------------------------------------
     def __call__(self, *args: Any, mask: Any = None, threads: int | None = None,
-                 **kwargs: Any) -> Any:
+                 out: Any = None, wait: bool = True, **kwargs: Any) -> Any:
         """Run the kernel over arrays.
 
         Positional arguments are the source-level varying params and the buffers, in order
         (they may also be given by keyword); uniform params are keywords (defaults from the
         manifest).  Returns a (N,) array, a (N, k) array for vectors, a dict for structs, a
-        tuple for tuples, or None."""
+        tuple for tuples, or None.
+
+        ``out``: the result of an earlier call of this kernel over as many elements; the
+        kernel writes into its arrays (lanes outside ``mask`` keep their old values) and
+        returns it.  A loop of calls then reuses its memory instead of faulting in fresh
+        pages on every call.
+
+        ``wait=False`` returns a :class:`Pending` at once, while the thread pool runs the
+        call: calls queued together share the pool, so one's last tasks overlap the next's
+        first (the arrays passed in must not change until ``result()``)."""
         pos = self._positional
         if len(args) > len(pos):
             raise self._err(f"expected {len(pos)} positional arguments "
@@ -298,44 +323,101 @@ class Kernel:
             c_vals[slot] = a.ctypes.data
 
         outs = [(i, a) for i, a in enumerate(self.args) if a["kind"] == "output"]
-        alloc = np.zeros if mask is not None else np.empty
         out_arrays = {}
-        # outputs of one dtype are the rows of one block, in result order: a vector result
-        # is then a view (no copy), and consecutive leaves are one contiguous array
-        blocks = {}
-        for dt in dict.fromkeys(a["dtype"] for _, a in outs):
-            count = sum(1 for _, a in outs if a["dtype"] == dt)
-            blocks[dt] = [alloc((count, n), dtype=_C_DTYPES[dt]), 0]
-        for i, a in outs:
-            blk = blocks[a["dtype"]]
-            arr = blk[0][blk[1]]
-            blk[1] += 1
-            out_arrays[a["name"]] = arr
-            c_vals[i] = arr.ctypes.data
+        if out is not None:
+            for (i, _), arr in zip(outs, self._out_leaves(out, n)):
+                c_vals[i] = arr.ctypes.data
+        else:
+            # outputs of one dtype are the rows of one block, in result order: a vector
+            # result is then a view (no copy), and consecutive leaves are one contiguous array
+            alloc = np.zeros if mask is not None else np.empty
+            blocks = {}
+            for dt in dict.fromkeys(a["dtype"] for _, a in outs):
+                count = sum(1 for _, a in outs if a["dtype"] == dt)
+                blocks[dt] = [alloc((count, n), dtype=_C_DTYPES[dt]), 0]
+            for i, a in outs:
+                blk = blocks[a["dtype"]]
+                arr = blk[0][blk[1]]
+                blk[1] += 1
+                out_arrays[a["name"]] = arr
+                c_vals[i] = arr.ctypes.data
         for i, a in enumerate(self.args):
             if a["kind"] == "buffer":
                 c_vals[i] = c_vals[i].ctypes.data
         mask_ptr = mask_arr.ctypes.data if mask is not None else None
 
-        self._run(n, c_vals, mask_ptr, threads)
-        del keep
-        return self._results(out_arrays, n)
+        futures = self._run(n, c_vals, mask_ptr, threads)
+        pending = Pending(futures, (keep, mask_arr if mask is not None else None, c_vals),
+                          lambda: out if out is not None else self._results(out_arrays, n))
+        return pending if not wait else pending.result()
 
-    def _run(self, n: int, c_vals: list[Any], mask_ptr: Any, threads: int | None) -> None:
+    def _run(self, n: int, c_vals: list[Any], mask_ptr: Any, threads: int | None
+             ) -> list[Future]:
+        """Run over [0, n): on this thread, or as tasks of the thread pool (their futures
+        are returned, not waited for)."""
         if n <= 0:
-            return
+            return []
         threads = (os.cpu_count() or 1) if threads is None else max(1, int(threads))
         if threads == 1 or n < 2 * MIN_CHUNK:
             self._fn(n, *c_vals, mask_ptr)
-            return
+            return []
         W = max(self.width, 1)
-        chunk = max(MIN_CHUNK, math.ceil(n / (threads * CHUNKS_PER_THREAD)))
-        chunk = (chunk + W - 1) // W * W
+        # tasks of at least MIN_CHUNK elements, as many for every thread: with one task
+        # more for some, the others would wait for it at the end of every call
+        tasks = max(1, min(threads * CHUNKS_PER_THREAD, n // MIN_CHUNK))
+        tasks = -(-tasks // threads) * threads
+        chunk = -(-math.ceil(n / tasks) // W) * W
         bounds = [(b, min(b + chunk, n)) for b in range(0, n, chunk)]
         pool = _pool(threads)
-        futures = [pool.submit(self._range, b, e, *c_vals, mask_ptr) for b, e in bounds]
-        for f in futures:
-            f.result()
+        return [pool.submit(self._range, b, e, *c_vals, mask_ptr) for b, e in bounds]
+
+    def _out_leaves(self, result: Any, n: int) -> list[np.ndarray]:
+        """The arrays of ``result`` (as ``_results`` builds it) for the output arguments, in
+        their order, checked to be writeable contiguous views of ``n`` elements of the right
+        dtype."""
+        bad = self._err(f"`out` is not a result of this kernel over {n} elements")
+        leaves: list[np.ndarray] = []
+
+        def walk(v: Any, t: dict[str, Any]) -> None:
+            kind = t["kind"]
+            if kind == "struct":
+                if not isinstance(v, dict):
+                    raise bad
+                for f, ft in t["fields"]:
+                    walk(v[f], ft)
+            elif kind == "tuple":
+                if not isinstance(v, tuple) or len(v) != len(t["elems"]):
+                    raise bad
+                for e, et in zip(v, t["elems"]):
+                    walk(e, et)
+            elif kind in ("vec", "mat"):
+                a = np.asarray(v)
+                if a.ndim < 2 or a.shape[0] != n:
+                    raise bad
+                cols = a.reshape(n, -1)
+                if not np.may_share_memory(cols, a):
+                    raise bad
+                leaves.extend(cols[:, j] for j in range(cols.shape[1]))
+            else:
+                leaves.append(np.asarray(v))
+
+        tj = self.result.get("type")
+        if tj is not None:
+            walk(result, tj)
+        names = self.result["leaves"]
+        if len(leaves) != len(names):
+            raise bad
+        by_name = dict(zip(names, leaves))
+        arrays = []
+        for a in self.args:
+            if a["kind"] != "output":
+                continue
+            leaf = by_name[a["name"]]
+            if leaf.shape != (n,) or leaf.dtype != DTYPES[a["dtype"]] or \
+                    not leaf.flags.c_contiguous or not leaf.flags.writeable:
+                raise bad
+            arrays.append(leaf)
+        return arrays
 
     def _results(self, out_arrays: dict[str, np.ndarray], n: int) -> Any:
         tj = self.result.get("type")

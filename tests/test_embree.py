@@ -127,6 +127,20 @@ def test_cube_matches_brute_force():
     assert scene.handle is None
 
 
+def test_two_level_scene_matches_brute_force(soup):
+    _, verts, faces = soup
+    half = len(faces) // 2  # two meshes sharing the vertices, under a BVH over the meshes
+    with E.EmbreeScene([(verts, faces[:half]), (verts, faces[half:])], quality="low",
+                       mesh_quality="high") as scene:
+        rays = random_rays(np.random.default_rng(4), 2000)
+        hits = scene.intersect(*rays)
+        both = E.EmbreeScene([(verts, faces)]).intersect(*rays)
+        np.testing.assert_array_equal(hits["hit"], both["hit"])
+        np.testing.assert_array_equal(hits["t"], both["t"])
+    with pytest.raises(ValueError, match="mesh_quality: expected one of"):
+        E.EmbreeScene([cube()], mesh_quality="best")
+
+
 def test_several_meshes_and_tmin():
     v, f = cube()
     scene = E.EmbreeScene([(v, f), (v + np.float32(5), f.astype(np.int64))])

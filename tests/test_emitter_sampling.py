@@ -33,10 +33,10 @@ import render.lights;
 import emitter.area;
 struct Est { d: Vec3, e: Float, pdf: Float, pdf_hit: Float, geom: Int, valid: Bool }
 fn estimate(p: Vec3, u: Vec2, upick: Float, nemitter: Int, env: Int, P: [Float], N: [Float],
-            UV: [Float], F: [Int], G: [Int], LC: [Float], LT: [Int], EK: [Int], E: [Float],
-            ENV: [Float]) -> Est {
+            UV: [Float], F: [Int], G: [Int], LC: [Float], LT: [Int], T: [Float], EK: [Int],
+            E: [Float], ENV: [Float]) -> Est {
     let n = Vec3(0.0, 0.0, 1.0);
-    let ls = sample_emitter(p, n, u, upick, nemitter, P, F, LC, LT, EK, E, ENV);
+    let ls = sample_emitter(p, n, u, upick, nemitter, P, UV, F, G, LC, LT, T, EK, E, ENV);
     if !ls.valid || !(ls.pdf > 0.0) {
         return Est { d: Vec3(0.0), e: 0.0, pdf: 0.0, pdf_hit: 0.0, geom: -1, valid: false };
     }
@@ -266,7 +266,7 @@ def sampled(tmp_path_factory):
     u = rng.random((n, 2)).astype(np.float32)
     upick = rng.random(n).astype(np.float32)
     out = mod.estimate(np.zeros((n, 3), np.float32), u, upick, lights.nemitter, lights.env, b.P,
-                       b.N, b.UV, b.F, b.G, lights.LC, lights.LT, *lights.args())
+                       b.N, b.UV, b.F, b.G, lights.LC, lights.LT, b.T, *lights.args())
     # which emitter each sample chose, as sample_emitter computes it (in float32)
     k = np.minimum((upick * np.float32(len(NAMES))).astype(int), len(NAMES) - 1)
     return scene, {key: np.asarray(v) for key, v in out.items()}, k

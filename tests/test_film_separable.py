@@ -48,7 +48,7 @@ def test_separable_equals_direct(kind, param):
     mod = rdsl.jit(source(film), target="host")
     cells = film["grid_w"] * film["grid_h"]
     rng = np.random.default_rng(kind * 10 + int(param * 10))
-    cell = np.repeat(np.arange(cells, dtype=np.int32), spp)
+    cell = np.tile(np.arange(cells, dtype=np.int32), spp)  # sample-major
     gx, gy = cell % film["grid_w"], cell // film["grid_w"]
     x = (gx + rng.random(cell.size)).astype(np.float32)
     y = (gy + rng.random(cell.size)).astype(np.float32)
@@ -59,7 +59,10 @@ def test_separable_equals_direct(kind, param):
                                              np.stack([w[f"w{k}"] for k in range(len(w))])]))
     pixels = np.arange(film["crop_w"] * film["crop_h"], dtype=np.int32)
     a = new_accumulator(film)
-    mod.direct(pixels, spp, np.ascontiguousarray(np.stack([x, y], 1).reshape(-1)), vals, a)
+    # film_accumulate reads cell-major samples: cell by cell, a cell's samples together
+    cm = np.arange(cell.size).reshape(spp, cells).T.reshape(-1)
+    mod.direct(pixels, spp, np.ascontiguousarray(np.stack([x, y], 1)[cm].reshape(-1)),
+               np.ascontiguousarray(vals.reshape(-1, 3)[cm].reshape(-1)), a)
     b = new_accumulator(film)
     mod.separable(pixels, spp, S.reshape(-1), cell.size, b)
     np.testing.assert_allclose(b, a, rtol=2e-6, atol=1e-7)

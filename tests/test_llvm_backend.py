@@ -346,6 +346,24 @@ def test_gather_scatter(lib):
     assert table[10] == 100.0  # store of load(table, 0) into element 10
 
 
+@pytest.mark.parametrize("step", [1, 0])
+@pytest.mark.parametrize("start", [0, 3, 16, 39])
+def test_gather_of_consecutive_or_equal_indices(lib, start, step):
+    """Lanes reading consecutive elements (or one element) take a masked vector load (or a
+    broadcast load) instead of a gather: the same values, masked lanes (index out of range)
+    included."""
+    n = 45
+    table = np.arange(64, dtype=np.float32) + 100
+    idx = (start + step * np.arange(n)).astype(np.int32)
+    idx[20] = 7  # one vector with a lane out of step
+    idx[32] = 60  # one whose lane 0 is masked
+    g = lib.gather(table, np.zeros(64, np.float32), idx, np.zeros(n, np.float32), size=40)
+    ok = idx < 40
+    seen = ok & (idx != 10)  # the kernel stores table[0] into table[10] after each vector
+    np.testing.assert_array_equal(g[seen], 100 + idx[seen].astype(np.float32))
+    assert (g[~ok] == 0).all()
+
+
 def test_bool_u64_and_uniform_bool(lib):
     p = np.array([True, False, True] * 11)
     w = np.arange(33, dtype=np.uint64) + np.uint64(2**63 - 5)

@@ -166,6 +166,36 @@ def test_threads_give_identical_results(mod):
                                   mod.lerp(wo[:, 0], wo[:, 1], wo[:, 2], threads=1))
 
 
+def test_out_reuses_a_result(mod):
+    rng = np.random.default_rng(3)
+    n = 37
+    first = mod["bsdf.shade"](_surf(n, rng), rng.standard_normal((n, 3)).astype(np.float32))
+    si, wo = _surf(n, rng), rng.standard_normal((n, 3)).astype(np.float32)
+    again = mod["bsdf.shade"](si, wo, out=first)
+    assert again is first
+    fresh = mod["bsdf.shade"](si, wo)
+    for k in fresh:
+        np.testing.assert_array_equal(again[k], fresh[k])
+    i = np.arange(n, dtype=np.int32)
+    res = mod.count(i)
+    assert mod.count(3 * i, out=res) is res
+    np.testing.assert_array_equal(res[0], 6 * i)
+    with pytest.raises(ValueError, match=r"`out` is not a result of this kernel over 5 "):
+        mod["bsdf.shade"](_surf(5, rng), np.zeros((5, 3)), out=first)
+
+
+def test_calls_queued_together(mod):
+    rng = np.random.default_rng(4)
+    n = 50_001
+    si, wo = _surf(n, rng), rng.standard_normal((n, 3)).astype(np.float32)
+    first = mod["bsdf.shade"](si, wo, threads=3, wait=False)
+    second = mod.lerp(wo[:, 0], wo[:, 1], wo[:, 2], threads=3, wait=False)
+    np.testing.assert_array_equal(second.result(), mod.lerp(wo[:, 0], wo[:, 1], wo[:, 2]))
+    got, want = first.result(), mod["bsdf.shade"](si, wo)
+    for k in want:
+        np.testing.assert_array_equal(got[k], want[k])
+
+
 def test_load_paths_and_module(mod, tmp_path):
     path = mod.path
     for p in (path, path.with_suffix(".json"), path.with_suffix("")):

@@ -19,7 +19,7 @@ import pytest
 import rdsl
 from rdsl.compiler.diagnostics import CompileError
 from rdsl.compiler.passes.specialize import Instance, SceneSpec
-from rdsl.runtime.render.bsdfs import MIXTURE
+from rdsl.runtime.render.bsdfs import mixture_params
 from rdsl.runtime.render.renderer import load_scene
 from test_bsdf_plugins import chi2_directions, pdf_fn, rng, sample, surface, tile, wi_at
 
@@ -198,7 +198,8 @@ def blend():
     leaves = [Instance("diffuse", {"reflectance": 0.7}),
               Instance("roughconductor", {"alpha": 0.2, "distribution": 1}),
               Instance("plastic", {"diffuse_reflectance": 0.6})]
-    mix = [Instance("mixture", {**MIXTURE, "a": a, "b": 1, "weight": 0.35}) for a in (0, 2)]
+    mix = [Instance("mixture", mixture_params([(a, 0.65, 0.65, False), (1, 0.35, 0.35, False)]))
+           for a in (0, 2)]
     return rdsl.jit(src, target="host", scene=SceneSpec(bsdfs=mix, bsdf_leaves=leaves))
 
 
@@ -258,7 +259,13 @@ def test_parameter_mapping(tmp_path):
      "sample_visible"),
     (('<bsdf type="blendbsdf"><float name="weight" value="0.5"/><bsdf type="diffuse"/>'
       '<bsdf type="blendbsdf"><float name="weight" value="0.5"/><bsdf type="diffuse"/>'
-      '<bsdf type="diffuse"/></bsdf></bsdf>'), "nested `blendbsdf`"),
+      '<bsdf type="blendbsdf"><float name="weight" value="0.5"/><bsdf type="diffuse"/>'
+      '<bsdf type="mask"><bsdf type="blendbsdf"><float name="weight" value="0.5"/>'
+      '<bsdf type="diffuse"/><bsdf type="diffuse"/></bsdf></bsdf></bsdf></bsdf></bsdf>'),
+     "nest 5 BSDFs"),
+    (('<bsdf type="blendbsdf"><float name="weight" value="0.5"/><bsdf type="diffuse"/>'
+      '<bsdf type="twosided"><bsdf type="mask"><bsdf type="roughdielectric"/></bsdf></bsdf>'
+      '</bsdf>'), "transmission"),
     ('<bsdf type="twosided"><bsdf type="dielectric"/></bsdf>', "transmission"),
 ])
 def test_mapping_errors(tmp_path, bsdf, words):

@@ -81,6 +81,7 @@ class Lowering:
         self.fn = fn
         self.b = L.IRBuilder(fn.append_basic_block("entry"))
         self.vals: dict[ir.Value, L.Value] = {}
+        self._from_memory: dict[ir.Value, bool] = {}
 
     # -- helpers ------------------------------------------------------------------------
     def v(self, value: ir.Value) -> L.Value:
@@ -88,6 +89,32 @@ class Lowering:
             return self.vals[value]
         except KeyError:
             raise CompileError(f"LLVM backend: use of undefined value {value!r}") from None
+
+    def from_memory(self, value: ir.Value) -> bool:
+        """Whether ``value`` is computed from something each lane read from memory or a ray
+        query (a gather's index then points anywhere; one from the kernel's own params,
+        counters, constants and uniform loads may well walk an array lane by lane).  Values
+        carried by loops count as not."""
+        memo = self._from_memory
+        stack = [value]
+        while stack:
+            v = stack[-1]
+            if v in memo:
+                stack.pop()
+                continue
+            ins = v.owner
+            if not isinstance(ins, ir.Instr):
+                memo[v] = False
+            elif ins.op in _MEMORY_OPS:
+                memo[v] = True
+            else:
+                todo = [o for o in ins.operands if o not in memo]
+                if todo:
+                    stack.extend(todo)
+                    continue
+                memo[v] = any(memo[o] for o in ins.operands)
+            stack.pop()
+        return memo[value]
 
     def call(self, name: str, ret: L.Type, *args: L.Value) -> L.Value:
         return self.b.call(self.m.intrinsic(name, ret, [a.type for a in args]), list(args))
@@ -369,6 +396,11 @@ def _lower_store(lw: Lowering, ins: ir.Instr) -> None:
     lw.b.store(_to_mem(lw, lw.v(val), e), p, align=ALIGN[e.name])
 
 
+# ops whose results vary per lane with memory (a uniform `load` is the same for every lane,
+# so an index built from one still walks lane by lane)
+_MEMORY_OPS = frozenset({ir.Op.GATHER, ir.Op.INTERSECT, ir.Op.OCCLUDED})
+
+
 def _lower_gather(lw: Lowering, ins: ir.Instr) -> L.Value:
     buf, idx, mask = ins.operands
     e = _buf_elem(buf)
@@ -378,9 +410,47 @@ def _lower_gather(lw: Lowering, ins: ir.Instr) -> L.Value:
     if not isinstance(m.type, L.VectorType):  # W == 1: a branch around the load
         return _from_mem(lw, lw.m.guarded_load(lw.b, p, mty, ALIGN[e.name], m), e)
     vty = L.VectorType(mty, m.type.count)
-    r = lw.call(f"llvm.masked.gather.{mangle(vty)}.{mangle(p.type)}", vty,
-                p, const(I32, ALIGN[e.name]), m, const(vty, 0))
-    return _from_mem(lw, r, e)
+    if idx.type.name != "i32" or lw.from_memory(idx):
+        r = lw.call(f"llvm.masked.gather.{mangle(vty)}.{mangle(p.type)}", vty,
+                    p, const(I32, ALIGN[e.name]), m, const(vty, 0))
+        return _from_mem(lw, r, e)
+    return _from_mem(lw, _gather_or_load(lw, lw.v(buf), lw.v(idx), p, m, vty,
+                                         ALIGN[e.name]), e)
+
+
+def _gather_or_load(lw: Lowering, base: L.Value, idx: L.Value, ptrs: L.Value, m: L.Value,
+                    vty: L.Type, align: int) -> L.Value:
+    """A masked gather, or a masked vector load when the lanes' i32 indices turn out to be
+    consecutive (``idx[k] == idx[0] + k``, checked at run time): the same values, from one
+    load instead of W.  Kernels that walk arrays lane by lane (the film's gather over a
+    batch of samples) take the load; other indices pay a compare and a branch, so indices
+    read from memory (a triangle's vertices) skip the check."""
+    b = lw.b
+    W = vty.count
+    ity = L.VectorType(I32, W)
+    first = b.extract_element(idx, const(I32, 0))
+    iota = L.Constant(ity, [L.Constant(I32, k) for k in range(W)])
+    step = b.icmp_signed("==", idx, b.add(lw.m.splat(b, first, W), iota))
+    bits = b.bitcast(step, L.IntType(W))
+    contiguous = b.icmp_signed("==", bits, L.Constant(L.IntType(W), -1))
+    load_bb = b.append_basic_block("contiguous")
+    gather_bb = b.append_basic_block("gather")
+    join_bb = b.append_basic_block("gathered")
+    b.cbranch(contiguous, load_bb, gather_bb)
+    b.position_at_end(load_bb)
+    p0 = b.gep(base, [b.sext(first, I64)], source_etype=vty.element)
+    loaded = lw.call(f"llvm.masked.load.{mangle(vty)}.p0", vty, p0, const(I32, align), m,
+                     const(vty, 0))
+    b.branch(join_bb)
+    b.position_at_end(gather_bb)
+    gathered = lw.call(f"llvm.masked.gather.{mangle(vty)}.{mangle(ptrs.type)}", vty,
+                       ptrs, const(I32, align), m, const(vty, 0))
+    b.branch(join_bb)
+    b.position_at_end(join_bb)
+    r = b.phi(vty)
+    r.add_incoming(loaded, load_bb)
+    r.add_incoming(gathered, gather_bb)
+    return r
 
 
 def _lower_scatter(lw: Lowering, ins: ir.Instr) -> None:

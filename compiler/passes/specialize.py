@@ -21,8 +21,10 @@ exists the dispatch calls it instead of ``{plugin}.{method}``.  A parameter whos
 a :class:`TextureRef` becomes ``scene_texture_eval(k, ...)``, called with the placeholder's
 arguments of the same names (``si``, ``T``), whose own dispatch covers the scene's textures;
 since a texture param ``reflectance(si)`` evaluates to the param value, evaluating the
-texture at the same ``si`` first is the same thing.  A method in ``OPTIONAL`` (``disperses``)
-may be missing from a plugin: its instances then give the constant listed there.
+texture at the same ``si`` first is the same thing.  A ``Float`` parameter set by a texture
+(a roughness) becomes ``scene_texture_eval_1(k, ...)`` likewise, the texture's one-value
+lookup (its plugins' ``eval_1``, Mitsuba's).  A method in ``OPTIONAL`` (``disperses``) may
+be missing from a plugin: its instances then give the constant listed there.
 
 The generic build (``Specialize(scene, fold=False)``, ``rdsl render --no-specialize``) keeps
 the same dispatch over plugin types but reads every parameter the scene sets from a float
@@ -67,6 +69,7 @@ PLACEHOLDERS = {
     "scene_bsdf_sample": ("bsdfs", "sample"),
     "scene_emitter_eval": ("emitters", "eval"),
     "scene_texture_eval": ("textures", "eval"),
+    "scene_texture_eval_1": ("textures", "eval_1"),  # a texture setting a Float parameter
     # the BSDFs nested in combinators (twosided, blendbsdf, mask): stdlib/render/bsdf_leaf.rdsl
     "scene_bsdf_leaf_eval": ("bsdf_leaves", "eval"),
     "scene_bsdf_leaf_pdf": ("bsdf_leaves", "pdf"),
@@ -78,6 +81,7 @@ PLACEHOLDERS = {
 # methods a plugin may lack: its instances then give this constant
 OPTIONAL = {"disperses": False}
 TEXTURE_PLACEHOLDER = "scene_texture_eval"
+TEXTURE_PLACEHOLDER_1 = "scene_texture_eval_1"
 EMITTER_KIND_PLACEHOLDER = "scene_has_emitter_kind"  # folded to the scene's emitter kinds
 SHAPE_KIND_PLACEHOLDER = "scene_has_shape_kind"  # folded to the scene's shape kinds
 PARAM_BUFFER = "PRM"  # the generic build's parameter buffer
@@ -255,7 +259,7 @@ class Specialize(Pass):
                 tb.yield_(tb.const(OPTIONAL[method], placeholder.ret_types[0]))
             else:
                 defaults = {p.value.name: p.default for p in own.params} if own else {}
-                textures: dict[int, Value] = {}
+                textures: dict[tuple[int, bool], Value] = {}
                 params = [self._param_value(tb, p, ident, [instances[k] for k in ids], ids,
                                             defaults.get(p.value.name), module, placeholder,
                                             textures)
@@ -283,7 +287,7 @@ class Specialize(Pass):
 
     def _param_value(self, b: Builder, p: Param, ident: Value, group: list[Instance],
                      ids: list[int], default: Any, module: Module, placeholder: Function,
-                     textures: dict[int, Value]) -> Value:
+                     textures: dict[tuple[int, bool], Value]) -> Value:
         """The parameter's constant (or texture call), or a select over the group's instances
         by id."""
         name = p.value.name or "?"
@@ -297,6 +301,8 @@ class Specialize(Pass):
             values.append(value)
         what = f"{group[0].plugin}.{name}"
 
+        scalar = p.value.type == F32
+
         def value_of(value: Any) -> Value:
             if isinstance(value, Slot):
                 if placeholder.name not in self._prm:
@@ -304,14 +310,15 @@ class Specialize(Pass):
                 return _load(b, p.value.type, value, self._prm[placeholder.name], what)
             if not isinstance(value, TextureRef):
                 return _constant(b, p.value.type, value, what)
-            if value.index not in textures:
-                textures[value.index] = self._texture(b, value.index, module, placeholder, what)
-            return textures[value.index]
+            key = (value.index, scalar)
+            if key not in textures:
+                textures[key] = self._texture(b, value.index, module, placeholder, what, scalar)
+            return textures[key]
 
-        if not isinstance(p.value.type, SpectrumType) and any(
+        if not (isinstance(p.value.type, SpectrumType) or scalar) and any(
                 isinstance(v, TextureRef) for v in values):
-            raise CompileError(f"{what}: a texture can only set a `Texture` parameter "
-                               f"(this one is `{p.value.type}`)")
+            raise CompileError(f"{what}: a texture can only set a `Texture` or `Float` "
+                               f"parameter (this one is `{p.value.type}`)")
         out = value_of(values[-1])
         for k, value in zip(reversed(ids[:-1]), reversed(values[:-1])):
             if value == values[-1]:
@@ -321,15 +328,17 @@ class Specialize(Pass):
         return out
 
     def _texture(self, b: Builder, index: int, module: Module, placeholder: Function,
-                 what: str) -> Value:
-        """``scene_texture_eval(index, ...)`` with ``placeholder``'s arguments of the same names."""
-        tex = module.functions.get(TEXTURE_PLACEHOLDER)
+                 what: str, scalar: bool = False) -> Value:
+        """``scene_texture_eval(index, ...)`` (``scene_texture_eval_1`` for a ``scalar``)
+        with ``placeholder``'s arguments of the same names."""
+        name = TEXTURE_PLACEHOLDER_1 if scalar else TEXTURE_PLACEHOLDER
+        tex = module.functions.get(name)
         if not 0 <= index < len(self.scene.textures):
             raise CompileError(f"{what}: texture {index} is not one of the scene's "
                                f"{len(self.scene.textures)} texture(s)")
-        if tex is None or placeholder.name == TEXTURE_PLACEHOLDER:
+        if tex is None or placeholder.name in (TEXTURE_PLACEHOLDER, TEXTURE_PLACEHOLDER_1):
             why = ("textures of textures are not supported" if tex is not None
-                   else f"`{TEXTURE_PLACEHOLDER}` is not defined (import render.scene)")
+                   else f"`{name}` is not defined (import render.scene)")
             raise CompileError(f"{what}: cannot evaluate a texture here: {why}")
         ours = {p.value.name: p.value for p in placeholder.params}
         operands = [b.const(index, I32)]

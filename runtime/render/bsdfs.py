@@ -6,19 +6,25 @@ The loader has resolved every Mitsuba parameter (defaults filled in, ``material`
 Each one is passed to the rdsl plugin's parameter of the same name, after these conversions:
 ``distribution`` "ggx"/"beckmann" to 0/1, ``alpha_u``/``alpha_v`` to ``alpha``/``alpha_v``
 (or to ``alpha`` alone where the plugin is isotropic and they agree), colors to RGB tuples and
-textures to references.  A parameter the rdsl plugin does not have is an error unless it
+textures to references (on a ``Float`` parameter, such as a roughness, to the texture's
+one-value lookup, Mitsuba's ``eval_1``; the scene schema says which parameters may be
+textures).  A parameter the rdsl plugin does not have is an error unless it
 holds Mitsuba's default, so nothing is dropped silently.
 
-A combinator is an instance of the rdsl plugin ``mixture`` (``stdlib/bsdf/mixture.rdsl``)
-whose Int parameters ``a``, ``b`` are the ids of its nested BSDFs among the scene's *leaves*
-(``SceneSpec.bsdf_leaves``, dispatched by ``stdlib/render/bsdf_leaf.rdsl``).  One level of
-nesting is supported, plus ``twosided`` around or inside ``blendbsdf`` and ``mask`` (which
-commute with it: their ``twosided`` flag).
+A tree of combinators, nested to any depth, is one instance of the rdsl plugin ``mixture``
+(``stdlib/bsdf/mixture.rdsl``): the tree is flattened into at most four terms, each a
+nested BSDF with its coefficient seen from above and from below (products of the blend
+weights and opacities on its path; ``twosided(x, y)`` routes each side to one of them) and
+whether it sees directions from below mirrored (a ``twosided`` on its path), plus the
+pass-through of ``mask``.  The Int parameters ``a`` .. ``d`` are the ids of the nested BSDFs
+among the scene's *leaves* (``SceneSpec.bsdf_leaves``, dispatched by
+``stdlib/render/bsdf_leaf.rdsl``).
 """
 
 from __future__ import annotations
 
 import re
+from dataclasses import dataclass
 from functools import cache
 from pathlib import Path
 from typing import Any
@@ -37,9 +43,11 @@ BSDF_PLUGINS = {"diffuse": "bsdf.diffuse", "roughconductor": "bsdf.roughconducto
                 "mixture": "bsdf.mixture", "polarizer": "bsdf.polarizer",
                 "retarder": "bsdf.retarder"}
 COMBINATORS = ("twosided", "blendbsdf", "mask")  # Mitsuba's, all rdsl's `mixture`
-LEAF_PARAMS = ("a", "b")  # the mixture's parameters that hold leaf ids
+LEAF_PARAMS = ("a", "b", "c", "d")  # the mixture's parameters that hold leaf ids
+MAX_TERMS = len(LEAF_PARAMS)  # nested BSDFs one combinator tree may hold
 # every parameter of the mixture_*_buffers functions (which have no defaults)
-MIXTURE = {"a": 0, "b": 0, "weight": 0.0, "null": 0.0, "twosided": False, "by_side": False}
+MIXTURE = {"a": 0, "b": 0, "c": 0, "d": 0, "above": (0.0,) * 4, "below": (0.0,) * 4,
+           "mirror": 0, "null_above": 0.0, "null_below": 0.0}
 DISTRIBUTIONS = {"ggx": 0, "beckmann": 1}
 TRANSMISSIVE = ("dielectric", "thindielectric", "roughdielectric", "polarizer", "retarder")
 # what a polarizing plugin does in an unpolarized render (as Mitsuba 3)
@@ -103,10 +111,12 @@ def _value(plugin: Any, name: str, value: Any, textures: Any) -> Any:
     """A parameter value as ``specialize`` takes it."""
     what = f"{plugin.type}.{name}"
     if getattr(value, "category", None) == "texture":
-        if textures is None or plugin_params(plugin.type).get(name) != "Texture":
+        kind = plugin_params(plugin.type).get(name)
+        if textures is None or kind not in ("Texture", "Float"):
             raise CompileError(f"{_where(plugin)}: a texture for `{name}` is not supported by "
                                "the renderer yet", plugin.loc)
-        return textures.ref(value, what)
+        # a Float parameter (a roughness) reads the texture's one-value lookup
+        return textures.ref(value, what, "scalar" if kind == "Float" else "colour")
     if getattr(value, "rgb", None) is not None:
         return spectrum_value(value, what, loc=plugin.loc)
     if isinstance(value, (bool, int, float)):
@@ -161,60 +171,86 @@ def leaf_instance(plugin: Any, textures: Any = None) -> Instance:
     return Instance(plugin.type, params, plugin.id or plugin.type)
 
 
-def _unwrap_twosided(plugin: Any) -> tuple[Any, bool]:
-    """``plugin`` or, for a twosided of one BSDF, the BSDF it wraps and True."""
-    if plugin.type == "twosided" and len(plugin.children) == 1:
-        return plugin.children[0], True
-    return plugin, False
-
-
-def _nested_error(outer: Any, inner: Any) -> CompileError:
-    return CompileError(f"{_where(outer)}: a nested `{inner.type}` is not supported by the "
-                        "renderer yet (one level of nesting, plus twosided around or inside "
-                        "blendbsdf and mask)", inner.loc or outer.loc)
-
-
 def bsdf_instance(plugin: Any, textures: Any = None) -> Instance:
     """The instance of a shape's BSDF; a combinator's nested BSDFs are its ``children``
     (``split_leaves`` numbers them)."""
     if plugin.type not in COMBINATORS:
         return leaf_instance(plugin, textures)
-    name = plugin.id or plugin.type
+    terms: list[_Term] = []
+    null = [0.0, 0.0]  # from above, from below
+    _flatten(plugin, 1.0, 1.0, False, False, terms, null)
+    terms = [t for t in terms if t.above > 0.0 or t.below > 0.0]
+    if len(terms) > MAX_TERMS:
+        raise CompileError(f"{_where(plugin)}: combinators that nest {len(terms)} BSDFs are not "
+                           f"supported by the renderer yet (at most {MAX_TERMS})", plugin.loc)
+    if not terms:  # fully transparent: a mixture whose one term has no share
+        terms = [_Term(_first_leaf(plugin), 0.0, 0.0, False)]
+    return Instance("mixture", mixture_params(
+        [(k, t.above, t.below, t.mirror) for k, t in enumerate(terms)], *null),
+        plugin.id or plugin.type, [leaf_instance(t.leaf, textures) for t in terms])
+
+
+def mixture_params(terms: list[tuple[int, float, float, bool]], null_above: float = 0.0,
+                   null_below: float = 0.0) -> dict[str, Any]:
+    """The ``mixture`` plugin's parameters for (leaf id, coefficient from above, from below,
+    mirrored from below) terms and the pass-through's coefficients."""
+    assert len(terms) <= MAX_TERMS
+    full = list(terms) + [(terms[0][0] if terms else 0, 0.0, 0.0, False)] * (MAX_TERMS -
+                                                                             len(terms))
+    params: dict[str, Any] = dict(zip(LEAF_PARAMS, (t[0] for t in full)))
+    params["above"] = tuple(float(t[1]) for t in full)
+    params["below"] = tuple(float(t[2]) for t in full)
+    params["mirror"] = sum(1 << i for i, t in enumerate(full) if t[3])
+    params["null_above"], params["null_below"] = float(null_above), float(null_below)
+    return params
+
+
+@dataclass
+class _Term:
+    """A nested BSDF of a combinator tree with its coefficients seen from above and from
+    below, and whether it sees directions from below mirrored (it is inside a twosided)."""
+
+    leaf: Any
+    above: float
+    below: float
+    mirror: bool
+
+
+def _flatten(plugin: Any, above: float, below: float, mirror: bool, in_twosided: bool,
+             terms: list[_Term], null: list[float]) -> None:
+    """Add the terms of ``plugin``'s subtree, reached with coefficients ``above`` and
+    ``below``; ``mirror``: the path from below has passed a twosided, which turned the
+    directions over (after that the subtree is seen from its front side only)."""
+    if plugin.type not in COMBINATORS:
+        if in_twosided and plugin.type in TRANSMISSIVE:
+            raise CompileError(f"{_where(plugin)}: only BSDFs without transmission can be "
+                               f"nested in twosided, not `{plugin.type}` (as Mitsuba)",
+                               plugin.loc)
+        terms.append(_Term(plugin, above, below, mirror))
+        return
     kids = plugin.children
-    if plugin.type == "twosided":
-        if len(kids) == 1 and kids[0].type in ("blendbsdf", "mask"):
-            inst = bsdf_instance(kids[0], textures)  # twosided commutes with them
-            if inst.params.get("twosided"):
-                raise _nested_error(plugin, kids[0])
-            inst.params["twosided"] = True
-            return inst
-        for k in kids:
-            if k.type in COMBINATORS:
-                raise _nested_error(plugin, k)
-        for k in kids:
-            if k.type in TRANSMISSIVE:
-                raise CompileError(f"{_where(plugin)}: only BSDFs without transmission can be "
-                                   f"nested in twosided, not `{k.type}` (as Mitsuba)",
-                                   k.loc or plugin.loc)
-        leaves = [leaf_instance(k, textures) for k in kids]
-        params = {**MIXTURE, "b": len(leaves) - 1, "twosided": True,
-                  "by_side": len(leaves) == 2}
-        return Instance("mixture", params, name, leaves)
-    unwrapped = [_unwrap_twosided(k) for k in kids]
-    flags = {t for _, t in unwrapped}
-    for k, _ in unwrapped:
-        if k.type in COMBINATORS:
-            raise _nested_error(plugin, k)
-    if len(flags) > 1:
-        raise CompileError(f"{_where(plugin)}: nesting a twosided and a one-sided BSDF is not "
-                           "supported by the renderer yet", plugin.loc)
-    leaves = [leaf_instance(k, textures) for k, _ in unwrapped]
     if plugin.type == "blendbsdf":
-        params = {**MIXTURE, "b": 1, "weight": _float(plugin, "weight")}
-    else:
-        params = {**MIXTURE, "null": 1.0 - _float(plugin, "opacity")}
-    params["twosided"] = flags == {True}
-    return Instance("mixture", params, name, leaves)
+        w = min(max(_float(plugin, "weight"), 0.0), 1.0)
+        _flatten(kids[0], above * (1 - w), below * (1 - w), mirror, in_twosided, terms, null)
+        _flatten(kids[1], above * w, below * w, mirror, in_twosided, terms, null)
+    elif plugin.type == "mask":
+        o = min(max(_float(plugin, "opacity"), 0.0), 1.0)
+        null[0] += above * (1 - o)
+        null[1] += below * (1 - o)
+        _flatten(kids[0], above * o, below * o, mirror, in_twosided, terms, null)
+    elif len(kids) == 1 or mirror:
+        # twosided(x): from below, x sees mirrored directions; a twosided(x, y) already
+        # turned to its front side sees x only
+        _flatten(kids[0], above, below, True, True, terms, null)
+    else:  # twosided(x, y): x from above, y from below (mirrored)
+        _flatten(kids[0], above, 0.0, True, True, terms, null)
+        _flatten(kids[1], 0.0, below, True, True, terms, null)
+
+
+def _first_leaf(plugin: Any) -> Any:
+    while plugin.type in COMBINATORS:
+        plugin = plugin.children[0]
+    return plugin
 
 
 def _float(plugin: Any, name: str) -> float:

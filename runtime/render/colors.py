@@ -5,7 +5,7 @@ A constant colour parameter reaches the compiler as a
 spectrum if it gave one, and whether it is emitted light); the compiler upsamples it.  Colours
 the kernels read from buffers (emitter tables, bitmap texels) are stored already encoded:
 linear sRGB in the mono and rgb variants, Jakob & Hanika coefficients in the spectral one
-(see compiler/passes/lift.py).
+(see compiler/passes/lift.py), and for emitted light a scale beside them.
 """
 
 from __future__ import annotations
@@ -20,9 +20,13 @@ from ...compiler.passes.specialize import SpectrumValue
 
 def spectrum_value(value: Any, what: str, illuminant: bool = False, loc: Any = None
                    ) -> SpectrumValue | float:
-    """A scene colour (``Color`` or a number) as a parameter value.  A number stays a number
-    for reflectances (a flat spectrum), but is a grey light for an emitter."""
+    """A scene colour (``Color`` or a number) as a parameter value.  A number or a grey stays
+    a number for everything but emitted light: a flat spectrum, whatever its value (a
+    conductor's k = 3.9 too); for an emitter it is a grey light (D65-shaped in spectral
+    builds), as in Mitsuba 3."""
     rgb = getattr(value, "rgb", None)
+    if rgb is not None and not illuminant and getattr(value, "is_uniform", False):
+        return float(rgb[0])  # a grey (or a <float>) is a flat spectrum, as Mitsuba's uniform
     if rgb is None:
         if isinstance(value, bool) or not isinstance(value, (int, float)):
             raise CompileError(f"{what}: a texture is not supported here (give an rgb or a "
@@ -56,3 +60,18 @@ def encode_texels(texels: np.ndarray, variant: str) -> np.ndarray:
     shape = texels.shape
     return np.asarray(rgb_to_coeffs(np.asarray(texels, np.float64).reshape(-1, 3)),
                       np.float32).reshape(shape)
+
+
+def emission_texels(rgb: np.ndarray, variant: str) -> np.ndarray:
+    """Emitted colours (n, 3) as an environment map's texels store them: 4 floats each,
+    read by ``illuminant(c0, c1, c2)`` and a scale (linear sRGB and 1 in mono and rgb;
+    coefficients of ``rgb / scale`` and ``scale = 2 max(rgb)`` in spectral, as Mitsuba's
+    envmap)."""
+    rgb = np.asarray(rgb, np.float64).reshape(-1, 3)
+    if variant.removesuffix("_polarized") != "spectral":
+        return np.concatenate([rgb, np.ones((len(rgb), 1))], axis=1)
+    from ..spectral import illuminant_from_rgb
+
+    coeffs, scale = illuminant_from_rgb(rgb)
+    return np.concatenate([np.asarray(coeffs, np.float64).reshape(-1, 3),
+                           np.asarray(scale, np.float64).reshape(-1, 1)], axis=1)

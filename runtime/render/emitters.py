@@ -15,7 +15,7 @@ from typing import Any
 import numpy as np
 
 from ...compiler.diagnostics import CompileError
-from .colors import emission_row
+from .colors import emission_row, emission_texels
 
 KINDS = {"area": 0, "point": 1, "spot": 2, "directional": 3, "constant": 4, "envmap": 5}
 ENVIRONMENTS = ("constant", "envmap")
@@ -153,15 +153,12 @@ def _emitter_row(em: Any, what: str, variant: str = "rgb"
     elif em.type == "constant":
         _put_color(row, p["radiance"], f"{what}: 'radiance'", em.loc, variant)
     else:  # envmap
-        if variant.removesuffix("_polarized") == "spectral":
-            raise CompileError(f"{what}: an environment map is not supported by the spectral "
-                               "variant yet (use rgb, or a constant emitter)", em.loc)
         if p.get("filter_type", "bilinear") != "bilinear":
             raise CompileError(f"{what}: filter_type '{p['filter_type']}' is not supported "
                                "by the renderer yet (supported: bilinear)", em.loc)
         lin = _linear_part(p["to_world"], what, em.loc, rigid=True)
         image = read_bitmap(p["filename"], what, em.loc)
-        table, (w, h) = envmap_tables(image)
+        table, (w, h) = envmap_tables(image, variant)
         row[0:3] = (float(p["scale"]), w, h)
         row[3:12] = lin.reshape(-1)
         row[12:21] = np.linalg.inv(lin).reshape(-1)
@@ -182,9 +179,12 @@ def read_bitmap(path: str | Path, what: str = "bitmap", loc: Any = None) -> np.n
         raise CompileError(f"{what}: cannot read `{path}`: {e}", loc) from None
 
 
-def envmap_tables(image: np.ndarray) -> tuple[np.ndarray, tuple[int, int]]:
+def envmap_tables(image: np.ndarray, variant: str = "rgb"
+                  ) -> tuple[np.ndarray, tuple[int, int]]:
     """ENV for a lat-long image (H, W, 3): texels, then the marginal and conditional CDFs
-    of the cells between texel rows and columns (stdlib/emitter/envmap.rdsl)."""
+    of the cells between texel rows and columns (stdlib/emitter/envmap.rdsl).  A texel is
+    4 floats, an emitted colour as ``variant`` stores it (``emission_texels``); the sampling
+    density follows the RGB luminance in every variant."""
     img = np.asarray(image, np.float64)
     if img.shape[0] == 1:  # one row: constant in theta, two rows for the poles
         img = np.concatenate([img, img], axis=0)
@@ -205,5 +205,6 @@ def envmap_tables(image: np.ndarray) -> tuple[np.ndarray, tuple[int, int]]:
     cond = np.concatenate([np.zeros((h - 1, 1)), np.cumsum(cells, axis=1) / safe], axis=1)
     cond[row_sums <= 0] = np.linspace(0.0, 1.0, w + 1)
     cond[:, -1] = 1.0
-    table = np.concatenate([img.reshape(-1), marginal, cond.reshape(-1)])
+    texels = emission_texels(img.reshape(-1, 3), variant)
+    table = np.concatenate([texels.reshape(-1), marginal, cond.reshape(-1)])
     return np.ascontiguousarray(table, np.float32), (w, h)

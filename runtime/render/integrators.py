@@ -7,6 +7,12 @@ channels (0 without one) and then one channel group per ``name:type`` entry of `
 named as aov.cpp names them (``dd.y:depth`` -> ``dd.y.T``, ``nn:sh_normal`` ->
 ``nn.X``, ``nn.Y``, ``nn.Z``).  This module only parses and names; the per-sample values
 are computed in rdsl.
+
+Mitsuba 3's ``stokes`` integrator (integrators/stokes.cpp) nests exactly one integrator and,
+in polarized variants, writes the Stokes vector of its estimate, turned into the sensor's
+frame (stdlib/render/stokes.rdsl), as twelve channels ``S0.R, S0.G, S0.B, ..., S3.B`` after
+the base ones (R = G = B in mono).  In unpolarized variants Mitsuba refuses it ("This
+integrator should only be used in polarized mode!"), and so does ``check_variant`` here.
 """
 
 from __future__ import annotations
@@ -16,9 +22,9 @@ from typing import Any
 
 from ...compiler.diagnostics import CompileError
 
-__all__ = ["AOV_TYPES", "INTEGRATORS", "IntegratorPlan", "integrator_plan"]
+__all__ = ["AOV_TYPES", "INTEGRATORS", "STOKES_CHANNELS", "IntegratorPlan", "integrator_plan"]
 
-INTEGRATORS = ("path", "direct", "aov")
+INTEGRATORS = ("path", "direct", "aov", "stokes")
 RADIANCE = ("path", "direct")
 # AOV type -> (channel suffixes, rdsl expression of the `Aov` struct `aov`, per channel)
 AOV_TYPES: dict[str, tuple[tuple[str, ...], tuple[str, ...]]] = {
@@ -30,24 +36,42 @@ AOV_TYPES: dict[str, tuple[tuple[str, ...], tuple[str, ...]]] = {
     "uv": (("U", "V"), ("aov.uv.x", "aov.uv.y")),
     "albedo": (("R", "G", "B"), ()),  # a Spectrum: expanded by the kernel writer
 }
+# the `stokes` integrator's channels, in Mitsuba's order (stokes.cpp `aov_names`)
+STOKES_CHANNELS = tuple(f"S{i}.{c}" for i in range(4) for c in "RGB")
 
 
 @dataclass
 class IntegratorPlan:
-    """What the render kernel computes per sample: the radiance integrator (None: black) and
-    the AOVs as (name, type) pairs."""
+    """What the render kernel computes per sample: the radiance integrator (None: black),
+    the AOVs as (name, type) pairs, and whether a ``stokes`` integrator writes S0..S3
+    (``stokes``: its XML node, for diagnostics)."""
 
     radiance: Any | None
     aovs: list[tuple[str, str]] = field(default_factory=list)
+    stokes: Any | None = None
 
     def aov_channel_names(self) -> list[str]:
-        """The AOV channels' EXR names, in film order."""
-        return [f"{name}.{s}" for name, kind in self.aovs for s in AOV_TYPES[kind][0]]
+        """The channels after the base ones, as the EXR names them, in film order: the Stokes
+        components first (as Mitsuba's stokes integrator inserts them), then the AOVs."""
+        return ([*STOKES_CHANNELS] if self.stokes is not None else []) + \
+            [f"{name}.{s}" for name, kind in self.aovs for s in AOV_TYPES[kind][0]]
+
+    def check_variant(self, variant: str) -> None:
+        """A ``stokes`` integrator needs a polarized variant: an error at its XML otherwise."""
+        if self.stokes is not None and not variant.endswith("_polarized"):
+            raise CompileError(
+                f"stokes: the Stokes integrator needs a polarized variant (`mono_polarized` or "
+                f"`spectral_polarized`); the `{variant}` variant carries no polarization, so "
+                "there are no S0..S3 channels to write and nothing is rendered (Mitsuba 3 "
+                "refuses it too: \"This integrator should only be used in polarized mode!\"). "
+                "Render with a polarized variant, or use the nested integrator directly.",
+                self.stokes.loc)
 
 
 def _check_radiance(integ: Any) -> None:
-    if integ.type == "aov":
-        raise CompileError("aov: an `aov` integrator cannot be nested in another", integ.loc)
+    if integ.type in ("aov", "stokes"):
+        raise CompileError(f"{integ.type}: an `{integ.type}` integrator cannot be nested in "
+                           "another one by the renderer yet", integ.loc)
     if integ.type not in RADIANCE:
         raise CompileError(f"integrator `{integ.type}` is not supported by the renderer yet "
                            f"(supported: {', '.join(INTEGRATORS)})", integ.loc)
@@ -74,6 +98,13 @@ def direct_samples(integ: Any) -> tuple[int, int]:
 
 def integrator_plan(integ: Any) -> IntegratorPlan:
     """Parse the scene's integrator; unsupported ones raise a CompileError at their XML."""
+    if integ.type == "stokes":
+        nested = list(integ.children)
+        if len(nested) != 1:  # the loader's schema already says so; kept for Plugin objects
+            raise CompileError("stokes: must specify exactly one sub-integrator "
+                               f"(got {len(nested)})", integ.loc)
+        _check_radiance(nested[0])
+        return IntegratorPlan(nested[0], stokes=integ)
     if integ.type != "aov":
         _check_radiance(integ)
         return IntegratorPlan(integ)

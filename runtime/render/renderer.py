@@ -35,7 +35,7 @@ from .bsdfs import (
     split_leaves,
 )
 from .camera import camera_uniforms
-from .colors import encode_texels, spectrum_value
+from .colors import spectrum_value
 from .emitters import KINDS as EMITTER_KINDS
 from .emitters import EmitterTables, emitter_tables
 from .film import develop, film_reach, film_uniforms, new_accumulator
@@ -76,6 +76,18 @@ class SceneBuffers:
                 self.T, *self.lights.args()]
 
 
+def _flat(v: np.ndarray, f: np.ndarray, normals: Any) -> bool:
+    """Whether every triangle's vertex normals are its geometric normal (a rectangle, a
+    cube): interpolating them gives that normal again, so the mesh is shaded with face
+    normals, and the kernels skip reading and interpolating them."""
+    n = np.asarray(normals, np.float64)[f]  # (M, 3 vertices, 3)
+    tri = v.astype(np.float64)[f]
+    ng = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+    ng /= np.maximum(np.linalg.norm(ng, axis=1, keepdims=True), 1e-30)
+    n = n / np.maximum(np.linalg.norm(n, axis=2, keepdims=True), 1e-30)
+    return bool(len(f)) and bool(np.all(np.einsum("mkj,mj->mk", n, ng) > 1 - 1e-6))
+
+
 def flatten(desc: Any, triangulate: bool = False, variant: str = "rgb"
             ) -> tuple[SceneBuffers, list[Instance], list[Instance]]:
     """Concatenate the scene's meshes and collect its BSDF and emitter instances.  Analytic
@@ -99,7 +111,7 @@ def flatten(desc: Any, triangulate: bool = False, variant: str = "rgb"
         emitter = -1
         if shape.emitter is not None:
             emitter = len(emitters)
-            emitters.append(_area_instance(shape.emitter))
+            emitters.append(_area_instance(shape.emitter, textures))
         analytic = None if triangulate else shape.analytic
         if analytic is not None:  # G's first entry is set below, with the records
             meshes.append(user_geometry(analytic))
@@ -115,7 +127,7 @@ def flatten(desc: Any, triangulate: bool = False, variant: str = "rgb"
         meshes.append((v, f))
         flags = 0
         P.append(v.reshape(-1))
-        if m.normals is not None and not m.face_normals:
+        if m.normals is not None and not m.face_normals and not _flat(v, f, m.normals):
             N.append(np.asarray(m.normals, np.float32).reshape(-1))
             flags |= 1
         else:
@@ -149,7 +161,7 @@ def flatten(desc: Any, triangulate: bool = False, variant: str = "rgb"
                         cat(F, np.int32), cat(G, np.int32),
                         emitter_tables(desc, lights, len(emitters), analytic_lights, variant),
                         meshes)
-    bufs.T, bufs.textures = encode_texels(textures.buffer(), variant), textures.instances
+    bufs.T, bufs.textures = textures.buffer(variant), textures.instances
     return bufs, bsdfs, emitters
 
 
@@ -158,12 +170,16 @@ def _shape_kind(flags: int) -> int:
     return next((SHAPE_KINDS[k] for k, bit in SHAPE_FLAGS.items() if flags & bit), 0)
 
 
-def _area_instance(em: Any) -> Instance:
-    """The ``area`` emitter instance of an emissive shape."""
+def _area_instance(em: Any, textures: TextureTable) -> Instance:
+    """The ``area`` emitter instance of an emissive shape; its radiance may be a texture."""
     if em.type not in EMITTER_PLUGINS:
         raise CompileError(f"emitter `{em.type}` is not supported by the renderer yet", em.loc)
+    radiance = em.params["radiance"]
+    if getattr(radiance, "category", None) == "texture":
+        return Instance(em.type, {"radiance": textures.ref(radiance, "area.radiance",
+                                                           "emitted")})
     return Instance(em.type, {"radiance": spectrum_value(
-        em.params["radiance"], "area.radiance", illuminant=True, loc=em.loc)})
+        radiance, "area.radiance", illuminant=True, loc=em.loc)})
 
 
 def _literal(value: Any, struct: str | None = None) -> str:
@@ -198,13 +214,22 @@ def _radiance_call(plan: IntegratorPlan, bufs: SceneBuffers) -> str:
                 f"{int(integ.params.get('rr_depth', 5))}, {lights}, {args});")
     if plan.aovs:
         line += "\n    let aov = aov_sample(ray, P, N, UV, F, G, T);"
+    if plan.stokes is not None:  # the Stokes vector in the sensor's frame (as Mitsuba)
+        line += "\n    let Ls = stokes_sensor_frame(L, ray.d, cam.basis.t);"
     return line
 
 
 def _aov_fields(plan: IntegratorPlan, channels: int, spectral: bool = False
                 ) -> list[tuple[str, str]]:
-    """(rdsl type, expression) of each FilmSample AOV field, in film channel order."""
+    """(rdsl type, expression) of each FilmSample AOV field, in film channel order: the
+    Stokes components S0..S3 of a ``stokes`` integrator as RGB each (Mitsuba's layout; the
+    one value repeated in mono), then the AOVs."""
     fields = []
+    if plan.stokes is not None:
+        for i in range(4):
+            s = f"mueller_entry(Ls, {i}, 0)"
+            fields.append(("Vec3", f"to_srgb(Spectrum({s}) * wavelength_weight)" if spectral
+                           else f"Vec3(mean({s}))"))
     for _, kind in plan.aovs:
         if kind == "albedo":  # a Spectrum; mono repeats its one value in R, G and B
             fields.append(("Vec3", "Vec3(mean(aov.albedo))") if channels == 1
@@ -224,6 +249,7 @@ def kernel_source(desc: Any, bufs: SceneBuffers, bsdfs: list[Instance],
     # first Stokes component for the unpolarized emitters), as Mitsuba's film does
     mono_pol = variant == "mono_polarized"
     plan = integrator_plan(desc.integrator)
+    plan.check_variant(variant)
     aov_fields = _aov_fields(plan, channels, spectral)
     cam = camera_uniforms(desc.sensor)
     film = film_uniforms(desc.sensor.film, 1, channels=channels + len(plan.aov_channel_names()))
@@ -237,6 +263,8 @@ def kernel_source(desc: Any, bufs: SceneBuffers, bsdfs: list[Instance],
         lines.append("import render.direct;")
     if plan.aovs:
         lines.append("import render.aov;")
+    if plan.stokes is not None:
+        lines.append("import render.stokes;")
     lines += [f"import {m};" for m in imports]
     m = 2 * film_reach(film) + 1  # columns (rows) one sample reaches
     wfields = ", ".join(f"w{k}: Float" for k in range(2 * m))
@@ -247,11 +275,17 @@ def kernel_source(desc: Any, bufs: SceneBuffers, bsdfs: list[Instance],
         f"{'Vec3' if spectral else 'Unpolarized' if mono_pol else 'Spectrum'}, bad: Bool, "
         + "".join(f"aov{k}: {t}, " for k, (t, _) in enumerate(aov_fields)) + f"{wfields} }}",
         "",
-        "fn render_sample(cell: Int, s: Int, spp: Int, seed: UInt, P: [Float], N: [Float],",
+        "// sample j of a batch: sample BATCH[0] + j / cells of cell j % cells (sample-major,",
+        "// as film_pass reads them); BATCH = [first sample, spp, seed], the same for every j",
+        "fn render_sample(j: Int, BATCH: [Int], P: [Float], N: [Float],",
         "                 UV: [Float], F: [Int], G: [Int], LC: [Float], LT: [Int],",
         "                 T: [Float], EK: [Int], E: [Float], ENV: [Float]) -> FilmSample {",
         f"    let cam = {_literal(cam, 'Camera')};",
         f"    let film = {_literal(dict(film, spp=1), 'Film')};",
+        f"    let cell = j % {film['grid_w'] * film['grid_h']};",
+        f"    let s = BATCH[0] + j / {film['grid_w'] * film['grid_h']};",
+        "    let spp = BATCH[1];",
+        "    let seed = UInt(BATCH[2]);",
         f"    let gx = cell % {film['grid_w']} + {film['grid_x']};",
         f"    let gy = cell / {film['grid_w']} + {film['grid_y']};",
         "    let stream = UInt64(cell) * UInt64(spp) + UInt64(s);",
@@ -280,10 +314,11 @@ def kernel_source(desc: Any, bufs: SceneBuffers, bsdfs: list[Instance],
         "}",
         "",
         "// the film's layout is a constant of the scene, so its loops and filter fold",
-        "fn film_pass(pixel: Int, spp: Int, S: [Float], ns: Int, acc: [Float]) {",
+        "// FB = [samples per cell in the batch, samples in the batch]",
+        "fn film_pass(pixel: Int, FB: [Int], S: [Float], acc: [Float]) {",
         f"    var film = {_literal(dict(film, spp=0), 'Film')};",
-        "    film.spp = spp;",
-        "    film_accumulate_separable(pixel, film, S, ns, acc);",
+        "    film.spp = FB[0];",
+        "    film_accumulate_separable(pixel, film, S, FB[1], acc);",
         "}",
         "",
     ]
@@ -305,12 +340,16 @@ class Scene:
         self.desc = load_scene_description(self.path, **defaults)
         self.spp = int(self.desc.sensor.sampler.params.get("sample_count", 4))
         self.seed = int(self.desc.sensor.sampler.params.get("seed", 0))
+        integrator_plan(self.desc.integrator).check_variant(variant)
         self.buffers, self.bsdfs, self.emitters = flatten(self.desc, triangulate, variant)
         for message in [*polarization_warnings(self.desc, variant),
                         *dispersion_warnings(self.desc, variant)]:
             warnings.warn(message, stacklevel=2)
         self.load_seconds = time.perf_counter() - t0
-        self.embree = EmbreeScene(self.buffers.meshes)
+        # two levels (a BVH per shape under one over the shapes): scenes of a few large
+        # shapes, such as the Cornell box, trace about a third faster than through one BVH
+        # over all triangles (bench/render_vs_mitsuba.py)
+        self.embree = EmbreeScene(self.buffers.meshes, quality="low", mesh_quality="high")
         self.target = target
         self.specialize = specialize
         self.params = np.zeros(1, np.float32)  # PRM of the generic build
@@ -405,18 +444,37 @@ class Scene:
         pixels = np.arange(film["crop_w"] * film["crop_h"], dtype=np.int32)
         self.nonfinite = 0
         bar = Progress(spp, label="rendering", unit="spp", enabled=progress)
-        done = 0
-        while done < spp:
-            n = min(batch, spp - done)
-            cell = np.repeat(np.arange(cells, dtype=np.int32), n)
-            s = np.tile(np.arange(done, done + n, dtype=np.int32), cells)
-            out = mod["render_sample"](cell, s, spp, np.uint32(seed), *self.buffers.args(),
-                                       *self._param_args(mod), threads=threads)
-            S = _film_samples(out, len(cell))
-            mod["film_pass"](pixels, n, S, len(cell), acc, threads=threads)
-            self.nonfinite += int(np.count_nonzero(out["bad"]))
-            done += n
-            bar.update(done)
+        # batch k renders while the film takes batch k - 1 (their tasks share the thread
+        # pool, so neither waits for the other's last tasks); each batch's output block is
+        # reused two batches later, so no batch faults in fresh pages
+        outs: list[Any] = [None, None]
+        j = np.arange(cells * batch, dtype=np.int32)  # a batch's sample indices
+        seed_bits = int(np.uint32(seed).view(np.int32))
+        waiting = None  # (samples, n) of the rendered batch the film has not taken yet
+        done = k = 0
+        while done < spp or waiting is not None:
+            job = None
+            if done < spp:
+                n = min(batch, spp - done)
+                if n != batch:  # the last, smaller batch
+                    outs = [None, None]
+                rs = np.array([done, spp, seed_bits], np.int32)
+                job = mod["render_sample"](j[:cells * n], rs, *self.buffers.args(),
+                                           *self._param_args(mod), threads=threads,
+                                           out=outs[k % 2], wait=False)
+            if waiting is not None:
+                prev, m = waiting
+                ns = len(prev["bad"])
+                mod["film_pass"](pixels, np.array([m, ns], np.int32), _film_samples(prev, ns),
+                                 acc, threads=threads)
+                self.nonfinite += int(np.count_nonzero(prev["bad"]))
+                bar.update(done)
+            waiting = None
+            if job is not None:
+                outs[k % 2] = job.result()
+                waiting = (outs[k % 2], n)
+                done += n
+                k += 1
         bar.finish()
         return develop(acc, dict(film, spp=spp))
 

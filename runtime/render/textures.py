@@ -3,8 +3,13 @@ buffer.
 
 A texture that sets a BSDF parameter becomes a :class:`TextureRef` in that BSDF's instance;
 the texture itself is an :class:`Instance` of the stdlib plugin (``stdlib/texture/``).  The
-texels of every bitmap are concatenated into ``T`` (3 float32 per texel, linear RGB, rows
-top to bottom), each bitmap's offset, width and height being constants of its instance.
+texels of every bitmap are concatenated into ``T`` (3 float32 per texel, rows top to bottom),
+each bitmap's offset, width and height being constants of its instance.  A texture that
+sets a colour stores them as the variant stores colours (runtime/render/colors.py); one that
+sets a Float parameter (``alpha``...) is a separate instance whose texels stay linear RGB,
+which its ``eval_1`` reads (Mitsuba's single-channel lookup: their luminance), and one that
+sets emitted light (an area emitter's ``radiance``) another, whose lookups are emitted
+colours (``illuminant``: times D65 in spectral builds, as Mitsuba's ``texture_d65``).
 Lookups, filtering and wrapping happen in rdsl (``stdlib/texture/bitmap.rdsl``); Python only
 decodes the images, as Mitsuba does when it loads them: 8-bit (and 16-bit) PNG and JPEG
 images are sRGB-encoded and are linearized unless ``raw`` is set, EXR images are linear.
@@ -18,14 +23,17 @@ from typing import Any
 import numpy as np
 
 from ...compiler.diagnostics import CompileError
-from ...compiler.passes.specialize import Instance, TextureRef
-from .colors import spectrum_value
+from ...compiler.passes.specialize import Instance, SpectrumValue, TextureRef
+from .colors import encode_texels, spectrum_value
 
 # Mitsuba plugin -> rdsl file under stdlib/
 TEXTURE_PLUGINS = {"bitmap": "texture.bitmap", "checkerboard": "texture.checkerboard"}
 # numbering of stdlib/texture/bitmap.rdsl (filter_bilinear() ... wrap_clamp())
 BITMAP_FILTERS = {"bilinear": 0, "nearest": 1}
 BITMAP_WRAPS = {"repeat": 0, "mirror": 1, "clamp": 2}
+# what a texture may set: a colour (a reflectance), a Float parameter (its eval_1), or
+# emitted light (an area emitter's radiance: spectral builds upsample it times D65)
+USAGES = ("colour", "scalar", "emitted")
 
 
 def srgb_to_linear(x: np.ndarray) -> np.ndarray:
@@ -83,26 +91,33 @@ class TextureTable:
 
     def __init__(self) -> None:
         self.instances: list[Instance] = []
-        self._ids: dict[int, tuple[Any, int]] = {}  # id(plugin) -> (plugin, index)
-        self._images: dict[tuple[str, bool], tuple[int, int, int, np.ndarray]] = {}
-        self._texels: list[np.ndarray] = []
+        # (id(plugin), usage) -> (plugin, index)
+        self._ids: dict[tuple[int, str], tuple[Any, int]] = {}
+        # (path, raw, usage) -> (offset, width, height, mean, scale)
+        self._images: dict[tuple[str, bool, str], tuple[int, int, int, Any, float]] = {}
+        self._texels: list[tuple[np.ndarray, bool]] = []  # (texels, encoded as a colour)
         self._count = 0
 
-    def ref(self, plugin: Any, what: str) -> TextureRef:
-        """The reference for texture ``plugin`` (``what``: the parameter it sets)."""
-        key = id(plugin)
+    def ref(self, plugin: Any, what: str, usage: str = "colour") -> TextureRef:
+        """The reference for texture ``plugin`` setting ``what``, a parameter of ``usage``
+        (one of :data:`USAGES`): each usage is an instance of its own, with its own texels."""
+        assert usage in USAGES, usage
+        key = (id(plugin), usage)
         if key not in self._ids:
             self._ids[key] = (plugin, len(self.instances))
-            self.instances.append(self._instance(plugin, what))
+            self.instances.append(self._instance(plugin, what, usage))
         return TextureRef(self._ids[key][1])
 
-    def buffer(self) -> np.ndarray:
-        """``T``: every bitmap's texels (never empty, so the kernels get a valid pointer)."""
+    def buffer(self, variant: str = "rgb") -> np.ndarray:
+        """``T``: every bitmap's texels, those of colour textures as ``variant`` stores
+        colours (never empty, so the kernels get a valid pointer)."""
         if not self._texels:
             return np.zeros(3, np.float32)
-        return np.ascontiguousarray(np.concatenate(self._texels), np.float32)
+        return np.ascontiguousarray(np.concatenate(
+            [encode_texels(t, variant) if colour else t for t, colour in self._texels]),
+            np.float32)
 
-    def _instance(self, plugin: Any, what: str) -> Instance:
+    def _instance(self, plugin: Any, what: str, usage: str) -> Instance:
         p = plugin.params
         name = plugin.id or plugin.type
         if plugin.type not in TEXTURE_PLUGINS:
@@ -110,23 +125,32 @@ class TextureTable:
                                f"renderer yet (supported: {', '.join(TEXTURE_PLUGINS)})",
                                plugin.loc)
         params: dict[str, Any] = _uv_rows(p["to_uv"])
+        emitted = usage == "emitted"
         if plugin.type == "checkerboard":
             for c in ("color0", "color1"):
                 rgb = getattr(p[c], "rgb", None)
                 if rgb is None:
                     raise CompileError(f"checkerboard.{c}: textures of textures are not "
                                        "supported by the renderer yet", plugin.loc)
-                params[c] = spectrum_value(p[c], f"checkerboard.{c}", loc=plugin.loc)
+                params[c] = spectrum_value(p[c], f"checkerboard.{c}", illuminant=emitted,
+                                           loc=plugin.loc)
+                params["rgb" + c[-1]] = tuple(float(x) for x in rgb)  # for eval_1
         else:
-            offset, w, h, mean = self._image(p["filename"], bool(p["raw"]), plugin)
-            params.update(offset=offset, width=w, height=h, average=mean,
+            offset, w, h, mean, scale = self._image(p["filename"], bool(p["raw"]), plugin,
+                                                    usage)
+            params.update(offset=offset, width=w, height=h,
+                          average=SpectrumValue(mean, None, emitted),
                           filter=BITMAP_FILTERS[p["filter_type"]],
-                          wrap=BITMAP_WRAPS[p["wrap_mode"]])
+                          wrap=BITMAP_WRAPS[p["wrap_mode"]], emitted=emitted, scale=scale)
         return Instance(plugin.type, params, name)
 
-    def _image(self, filename: str, raw: bool, plugin: Any
-               ) -> tuple[int, int, int, tuple[float, ...]]:
-        key = (str(Path(filename).resolve()), raw)
+    def _image(self, filename: str, raw: bool, plugin: Any, usage: str
+               ) -> tuple[int, int, int, tuple[float, float, float], float]:
+        """The image's place in ``T``, its mean and the scale its texels were divided by.
+        Emitted light is stored over ``scale`` = 2 max if its max exceeds 1 (else 1, as
+        Mitsuba stores an emission bitmap), so spectral builds fit coefficients to values
+        in [0, 1]."""
+        key = (str(Path(filename).resolve()), raw, usage)
         if key not in self._images:
             try:
                 img = load_bitmap(filename, raw)
@@ -135,8 +159,10 @@ class TextureTable:
                                    plugin.loc) from None
             h, w = img.shape[:2]
             mean = tuple(float(x) for x in img.reshape(-1, 3).mean(axis=0))
-            self._images[key] = (self._count, w, h, mean)
-            self._texels.append(img.reshape(-1))
+            peak = float(img.max()) if img.size else 0.0
+            scale = 2.0 * peak if usage == "emitted" and peak > 1.0 else 1.0
+            texels = img.reshape(-1) if scale == 1.0 else img.reshape(-1) / np.float32(scale)
+            self._images[key] = (self._count, w, h, mean, scale)
+            self._texels.append((texels, usage != "scalar"))
             self._count += w * h
-        offset, w, h, mean = self._images[key]
-        return offset, w, h, mean
+        return self._images[key]

@@ -113,8 +113,10 @@ _SPECS = [
     PluginSpec("bsdf", "thindielectric", dict(_DIELECTRIC)),
     PluginSpec("bsdf", "roughdielectric", {**_DIELECTRIC, **_ROUGH}),
     PluginSpec("bsdf", "plastic", dict(_PLASTIC)),
+    # Mitsuba 3's roughplastic takes a constant alpha (it tabulates its transmittance once);
+    # rdsl's evaluates it per call, so a texture works (an rdsl extension)
     PluginSpec("bsdf", "roughplastic", {**_PLASTIC, "distribution": _DIST,
-                                        "alpha": P("float", 0.1),
+                                        "alpha": P("ftex", 0.1),
                                         "sample_visible": P("boolean", True)}),
     # polarization: Mitsuba 3's angles are textures; rdsl takes constant degrees
     PluginSpec("bsdf", "polarizer", {"theta": P("float", 0.0), "transmittance": P("color", 1.0),
@@ -155,6 +157,7 @@ _SPECS = [
                                         "shading_samples": P("integer"),
                                         "hide_emitters": P("boolean", False)}),
     PluginSpec("integrator", "aov", {"aovs": P("string", REQUIRED)}, {"integrator": (0, 8)}),
+    PluginSpec("integrator", "stokes", {}, {"integrator": (1, 1)}),
     # sensors, film, filters, samplers
     PluginSpec("sensor", "perspective", {**_CAMERA,
                                          "principal_point_offset_x": P("float", 0.0),
