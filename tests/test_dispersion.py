@@ -96,6 +96,22 @@ def test_snell_per_wavelength(mods, variant, theta):
         assert np.all(np.isfinite(bs["mueller"]))
 
 
+def test_plugin_on_its_own_has_no_dispersion():
+    """The dielectric compiled on its own in a spectral variant has no wavelengths (`if const
+    wavelengths` is false there): it refracts by n at 589.3 nm, as mono and rgb do."""
+    import rdsl
+    from rdsl.runtime.render.bsdfs import STDLIB
+
+    mod = rdsl.jit(str(STDLIB / "bsdf" / "dielectric.rdsl"), target="host", variant="spectral")
+    n, wi = 4096, wi_at(0.8)
+    bs = sample(mod, "dielectric", wi, n, rng("alone"), int_cauchy_b=B)[1]
+    t = bs["wo"][:, 2] < 0
+    eta = cauchy(A, B, D_LINE) / EXT
+    np.testing.assert_allclose(bs["wo"][t, :2], np.broadcast_to(-wi[:2] / eta, (t.sum(), 2)),
+                               atol=2e-6)
+    assert t.any() and not t.all()
+
+
 # ---------------------------------------------------------------------------- 2. unbiased
 
 BANDS = {"all": (0, 1e9), "blue": (0, 480), "red": (620, 1e9)}

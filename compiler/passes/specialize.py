@@ -260,7 +260,13 @@ class Specialize(Pass):
             else:
                 defaults = {p.value.name: p.default for p in own.params} if own else {}
                 textures: dict[tuple[int, bool], Value] = {}
-                params = [self._param_value(tb, p, ident, [instances[k] for k in ids], ids,
+                # an optional method's unused parameters are 0: a texture there may need
+                # arguments (si) that its placeholder lacks
+                used = ({v for i in callee.walk() for v in i.operands}
+                        if method in OPTIONAL else None)
+                params = [_constant(tb, p.value.type, False, placeholder.name)
+                          if used is not None and p.value not in used else
+                          self._param_value(tb, p, ident, [instances[k] for k in ids], ids,
                                             defaults.get(p.value.name), module, placeholder,
                                             textures)
                           for p in callee.params[len(lead):]]
