@@ -69,7 +69,8 @@ __all__ = [
 ]
 
 
-TRAITS = ("mono", "rgb", "spectral", "polarized")
+# `wavelengths`: a spectral build whose kernel sets its wavelengths (compiler/passes/lift.py)
+TRAITS = ("mono", "rgb", "spectral", "polarized", "wavelengths")
 
 PLUGIN_INTERFACES: dict[str, list[tuple[str, list[tuple[str, str]], str]]] = {
     "bsdf": [("eval", [("si", "Surface"), ("wo", "Vec3")], "Spectrum"),

@@ -10,7 +10,9 @@ described by a :class:`SpectrumModel`.
 
 Spectral variants (``n = 4``) carry the four wavelengths of a sample as an implicit value:
 ``set_wavelengths(wl)`` in the kernel's top-level block defines it, and every colour after it
-is evaluated there.  Colours become spectra as in Mitsuba 3:
+is evaluated there.  The trait ``wavelengths`` (``if const wavelengths``) is true in a kernel
+that sets them, so that code needing them can fall back in one that does not (a plugin
+compiled on its own).  Colours become spectra as in Mitsuba 3:
 
 * ``Spectrum(r, g, b)`` with constant arguments is a reflectance: the Jakob & Hanika 2019
   sigmoid polynomial whose sRGB colour is (r, g, b), its coefficients found at compile time.
@@ -140,6 +142,10 @@ class Lift(Pass):
             fn.ret_types = [self.lift_type(t) for t in fn.ret_types]
             mapping: dict[Value, Value] = {}
             self.traits: set[Value] = set()
+            # `if const wavelengths`: this kernel has wavelengths (a plugin compiled on its own
+            # has none, so code that needs them can fall back)
+            sets = self.model.n == 4 and any(i.op is Op.SPEC_SET for i in fn.walk())
+            self.fn_traits = self.model.traits | ({"wavelengths"} if sets else set())
             self._fold_traits(fn.body, mapping)
             replace_uses(fn.body, mapping)
             self.spectral = _Spectral(self.model, fn.loc) if self.model.n == 4 else None
@@ -164,7 +170,7 @@ class Lift(Pass):
             ins = work.pop(0)
             ins.operands = [find(v) for v in ins.operands]
             if ins.op is Op.CONST and "trait" in ins.attrs:
-                ins.attrs = {"value": ins.attrs["trait"] in self.model.traits}
+                ins.attrs = {"value": ins.attrs["trait"] in self.fn_traits}
                 self.traits.add(ins.result)
             if ins.op is Op.IF and ins.operands[0] in self.traits:
                 cond = ins.operands[0].owner.attrs["value"]

@@ -23,7 +23,8 @@ arguments of the same names (``si``, ``T``), whose own dispatch covers the scene
 since a texture param ``reflectance(si)`` evaluates to the param value, evaluating the
 texture at the same ``si`` first is the same thing.  A ``Float`` parameter set by a texture
 (a roughness) becomes ``scene_texture_eval_1(k, ...)`` likewise, the texture's one-value
-lookup (its plugins' ``eval_1``, Mitsuba's).
+lookup (its plugins' ``eval_1``, Mitsuba's).  A method in ``OPTIONAL`` (``disperses``) may
+be missing from a plugin: its instances then give the constant listed there.
 
 The generic build (``Specialize(scene, fold=False)``, ``rdsl render --no-specialize``) keeps
 the same dispatch over plugin types but reads every parameter the scene sets from a float
@@ -73,7 +74,12 @@ PLACEHOLDERS = {
     "scene_bsdf_leaf_eval": ("bsdf_leaves", "eval"),
     "scene_bsdf_leaf_pdf": ("bsdf_leaves", "pdf"),
     "scene_bsdf_leaf_sample": ("bsdf_leaves", "sample"),
+    # whether the BSDF disperses light (stdlib/dispersion.rdsl): optional, see OPTIONAL
+    "scene_bsdf_disperses": ("bsdfs", "disperses"),
+    "scene_bsdf_leaf_disperses": ("bsdf_leaves", "disperses"),
 }
+# methods a plugin may lack: its instances then give this constant
+OPTIONAL = {"disperses": False}
 TEXTURE_PLACEHOLDER = "scene_texture_eval"
 TEXTURE_PLACEHOLDER_1 = "scene_texture_eval_1"
 EMITTER_KIND_PLACEHOLDER = "scene_has_emitter_kind"  # folded to the scene's emitter kinds
@@ -244,19 +250,29 @@ class Specialize(Pass):
             callee, lead = module.functions.get(f"{plugin}_{method}_buffers"), args
             if callee is None:
                 callee, lead = own, plain
-            if callee is None:
+            if callee is None and method not in OPTIONAL:
                 raise CompileError(f"plugin `{plugin}` has no function `{method}` "
                                    "(is its file imported?)")
-            defaults = {p.value.name: p.default for p in own.params} if own else {}
             then = Block()
             tb = Builder(then, placeholder.loc)
-            textures: dict[tuple[int, bool], Value] = {}
-            params = [self._param_value(tb, p, ident, [instances[k] for k in ids], ids,
-                                        defaults.get(p.value.name), module, placeholder, textures)
-                      for p in callee.params[len(lead):]]
-            call = tb.emit(Op.CALL, lead + params, list(callee.ret_types),
-                           {"callee": callee.name})
-            tb.yield_(*call.results)
+            if callee is None:
+                tb.yield_(tb.const(OPTIONAL[method], placeholder.ret_types[0]))
+            else:
+                defaults = {p.value.name: p.default for p in own.params} if own else {}
+                textures: dict[tuple[int, bool], Value] = {}
+                # an optional method's unused parameters are 0: a texture there may need
+                # arguments (si) that its placeholder lacks
+                used = ({v for i in callee.walk() for v in i.operands}
+                        if method in OPTIONAL else None)
+                params = [_constant(tb, p.value.type, False, placeholder.name)
+                          if used is not None and p.value not in used else
+                          self._param_value(tb, p, ident, [instances[k] for k in ids], ids,
+                                            defaults.get(p.value.name), module, placeholder,
+                                            textures)
+                          for p in callee.params[len(lead):]]
+                call = tb.emit(Op.CALL, lead + params, list(callee.ret_types),
+                               {"callee": callee.name})
+                tb.yield_(*call.results)
             if tail is None:
                 tail = then  # the last type needs no test: ids come from the scene
                 continue

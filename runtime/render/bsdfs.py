@@ -76,6 +76,26 @@ def polarization_warnings(desc: Any, variant: str) -> list[str]:
     return out
 
 
+def dispersion_warnings(desc: Any, variant: str) -> list[str]:
+    """Warnings for dispersive dielectrics (Cauchy B terms) in a variant without wavelengths."""
+    if variant.removesuffix("_polarized") == "spectral":
+        return []
+    out = []
+    todo = [shape.bsdf for shape in desc.shapes if getattr(shape, "bsdf", None) is not None]
+    seen: set[int] = set()
+    while todo:
+        plugin = todo.pop(0)
+        todo += plugin.children
+        if id(plugin) in seen:
+            continue
+        seen.add(id(plugin))
+        if plugin.params.get("int_cauchy_b") or plugin.params.get("ext_cauchy_b"):
+            out.append(f"{plugin.loc or desc.path}: warning: {_where(plugin)} is dispersive "
+                       f"(Cauchy B term), which only spectral variants render; the `{variant}` "
+                       "variant uses its IOR at 589.3 nm (the sodium D line) for every colour.")
+    return out
+
+
 @cache
 def plugin_params(plugin: str) -> dict[str, str]:
     """The rdsl plugin's ``param`` names and types, read from its source."""

@@ -27,7 +27,13 @@ from ...compiler.passes.specialize import (
     parameter_slots,
 )
 from ..scene import load_scene_description
-from .bsdfs import BSDF_PLUGINS, bsdf_instance, polarization_warnings, split_leaves
+from .bsdfs import (
+    BSDF_PLUGINS,
+    bsdf_instance,
+    dispersion_warnings,
+    polarization_warnings,
+    split_leaves,
+)
 from .camera import camera_uniforms
 from .colors import spectrum_value
 from .emitters import KINDS as EMITTER_KINDS
@@ -336,7 +342,8 @@ class Scene:
         self.seed = int(self.desc.sensor.sampler.params.get("seed", 0))
         integrator_plan(self.desc.integrator).check_variant(variant)
         self.buffers, self.bsdfs, self.emitters = flatten(self.desc, triangulate, variant)
-        for message in polarization_warnings(self.desc, variant):
+        for message in [*polarization_warnings(self.desc, variant),
+                        *dispersion_warnings(self.desc, variant)]:
             warnings.warn(message, stacklevel=2)
         self.load_seconds = time.perf_counter() - t0
         # two levels (a BVH per shape under one over the shapes): scenes of a few large

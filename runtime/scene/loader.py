@@ -39,6 +39,9 @@ from .schema import (
 from .spectra import Color, conductor_ior, lookup_ior
 from .xml import Child, ObjectNode, Prop, SceneTree, read_scene
 
+# the largest Cauchy B term accepted (um^2): glasses are below 0.02, so a larger value is a
+# unit mistake (nm^2) rather than a material
+MAX_CAUCHY_B = 1.0
 _KIND_NAMES = {"float": "a float", "integer": "an integer", "boolean": "a boolean",
                "string": "a string", "point": "a point", "vector": "a vector",
                "transform": "a transform", "color": "a color (float, rgb, spectrum or texture)",
@@ -352,6 +355,14 @@ class _Builder:
                 p["alpha_u"] = p["alpha_v"] = p["alpha"]
         if "int_ior" in p:
             p["eta"] = p["int_ior"] / p["ext_ior"] if p["ext_ior"] > 0 else 0.0
+        for side in ("int", "ext"):
+            b = p.get(f"{side}_cauchy_b")
+            if b is not None and not 0.0 <= b <= MAX_CAUCHY_B:
+                raise scene_error(
+                    f"{self.what(node)}: '{side}_cauchy_b' is {b:g}; Cauchy's B term is in "
+                    f"um^2 and must lie in [0, {MAX_CAUCHY_B:g}] (BK7: 0.00420, dense flint "
+                    "glass: ~0.014; a value in nm^2 is 10^6 times too large)",
+                    _loc(node, f"{side}_cauchy_b"))
 
     def finish_texture(self, obj: Plugin, node: ObjectNode, objects: dict) -> None:
         p = obj.params

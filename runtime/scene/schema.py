@@ -71,7 +71,10 @@ _ROUGH = {"distribution": _DIST, "alpha": P("ftex", 0.1), "alpha_u": P("ftex"),
           "alpha_v": P("ftex"), "sample_visible": P("boolean", True)}
 _CONDUCTOR = {"material": P("string", "none"), "eta": P("color"), "k": P("color"),
               "specular_reflectance": P("color", 1.0)}
+# int_cauchy_b / ext_cauchy_b (an rdsl extension): Cauchy's B term in um^2, the IOR being
+# the A term (n = A + B / l^2, l in um; stdlib/dispersion.rdsl)
 _DIELECTRIC = {"int_ior": P("ior", "bk7"), "ext_ior": P("ior", "air"),
+               "int_cauchy_b": P("float", 0.0), "ext_cauchy_b": P("float", 0.0),
                "specular_reflectance": P("color", 1.0),
                "specular_transmittance": P("color", 1.0)}
 _PLASTIC = {"diffuse_reflectance": P("color", 0.5), "specular_reflectance": P("color", 1.0),
