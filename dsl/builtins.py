@@ -43,6 +43,19 @@ BUILTIN_FNS = {
 }
 
 
+# builtins of one fixed signature: (argument types, result type; None for no value)
+_FIXED: dict[str, tuple[tuple[Type, ...], Type | None]] = {
+    "bits": ((F32,), U32),
+    "from_bits": ((U32,), F32),
+    "Unpolarized": ((F32,), UNPOLARIZED),
+    "unpolarized": ((SPECTRUM,), UNPOLARIZED),
+    "depolarizer": ((UNPOLARIZED,), SPECTRUM),
+    "set_wavelengths": ((SPECTRUM,), None),
+    "wavelengths": ((), SPECTRUM),
+    "to_srgb": ((SPECTRUM,), VecType(3)),
+}
+
+
 def check_builtin(e: A.Call, name: str, args: list[A.Expr], types: list[Type | None],
                   structs: dict[str, StructType]) -> Type | None:
     """Check a call of builtin ``name``; annotate ``e`` and return its result type.
@@ -71,6 +84,12 @@ def check_builtin(e: A.Call, name: str, args: list[A.Expr], types: list[Type | N
         return t
 
     float_like = lambda t: t == F32 or (is_float_agg(t) and not isinstance(t, MatType))
+    if name in _FIXED:
+        params, result = _FIXED[name]
+        nargs(len(params))
+        for i, want in enumerate(params):
+            arg(i, want)
+        return finish(result)
     if name in ("sqrt", "floor", "ceil", "abs"):
         nargs(1)
         if is_int_literal(args[0]):
@@ -101,14 +120,6 @@ def check_builtin(e: A.Call, name: str, args: list[A.Expr], types: list[Type | N
                       f"and {quoted(types[2])}", loc)
         args[1], args[2], t = u
         return finish(t)
-    if name == "bits":
-        nargs(1)
-        arg(0, F32)
-        return finish(U32)
-    if name == "from_bits":
-        nargs(1)
-        arg(0, U32)
-        return finish(F32)
     if name in ("Float", "Int", "UInt", "UInt64", "Bool"):
         nargs(1)
         t = types[0]
@@ -143,18 +154,6 @@ def check_builtin(e: A.Call, name: str, args: list[A.Expr], types: list[Type | N
         for i in range(len(args)):
             arg(i, F32)
         return finish(SPECTRUM)
-    if name == "Unpolarized":
-        nargs(1)
-        arg(0, F32)
-        return finish(UNPOLARIZED)
-    if name == "unpolarized":
-        nargs(1)
-        arg(0, SPECTRUM)
-        return finish(UNPOLARIZED)
-    if name == "depolarizer":
-        nargs(1)
-        arg(0, UNPOLARIZED)
-        return finish(SPECTRUM)
     if name == "mueller":
         nargs(16)
         for i in range(16):
@@ -169,17 +168,6 @@ def check_builtin(e: A.Call, name: str, args: list[A.Expr], types: list[Type | N
                 raise err(f"argument {i + 1} of `mueller_entry`: expected an integer literal "
                           "0..3", a.loc)
         return finish(UNPOLARIZED)
-    if name == "set_wavelengths":
-        nargs(1)
-        arg(0, SPECTRUM)
-        return finish(None)
-    if name == "wavelengths":
-        nargs(0)
-        return finish(SPECTRUM)
-    if name == "to_srgb":
-        nargs(1)
-        arg(0, SPECTRUM)
-        return finish(VecType(3))
     if name in ("mean", "max_value"):
         nargs(1)
         if types[0] != UNPOLARIZED:

@@ -24,6 +24,7 @@ among the scene's *leaves* (``SceneSpec.bsdf_leaves``, dispatched by
 from __future__ import annotations
 
 import re
+from collections.abc import Iterator
 from dataclasses import dataclass
 from functools import cache
 from pathlib import Path
@@ -56,18 +57,24 @@ UNPOLARIZED_BEHAVIOUR = {
     "retarder": "fully transparent: it transmits all light unchanged"}
 
 
+def _scene_bsdfs(desc: Any) -> Iterator[Any]:
+    """Every distinct BSDF plugin of the scene's shapes, nested ones included."""
+    todo = [shape.bsdf for shape in desc.shapes if getattr(shape, "bsdf", None) is not None]
+    seen: set[int] = set()
+    while todo:
+        plugin = todo.pop(0)
+        todo += plugin.children
+        if id(plugin) not in seen:
+            seen.add(id(plugin))
+            yield plugin
+
+
 def polarization_warnings(desc: Any, variant: str) -> list[str]:
     """Warnings for plugins whose meaning is polarization, in an unpolarized variant."""
     if variant.endswith("_polarized"):
         return []
-    out, seen = [], set()
-    todo = [shape.bsdf for shape in desc.shapes if getattr(shape, "bsdf", None) is not None]
-    while todo:
-        plugin = todo.pop(0)
-        todo += plugin.children
-        if id(plugin) in seen:
-            continue
-        seen.add(id(plugin))
+    out = []
+    for plugin in _scene_bsdfs(desc):
         if plugin.type in UNPOLARIZED_BEHAVIOUR:
             out.append(f"{plugin.loc or desc.path}: warning: {_where(plugin)} has no effect on "
                        f"polarization in the unpolarized `{variant}` variant; it acts as "
@@ -81,14 +88,7 @@ def dispersion_warnings(desc: Any, variant: str) -> list[str]:
     if variant.removesuffix("_polarized") == "spectral":
         return []
     out = []
-    todo = [shape.bsdf for shape in desc.shapes if getattr(shape, "bsdf", None) is not None]
-    seen: set[int] = set()
-    while todo:
-        plugin = todo.pop(0)
-        todo += plugin.children
-        if id(plugin) in seen:
-            continue
-        seen.add(id(plugin))
+    for plugin in _scene_bsdfs(desc):
         if plugin.params.get("int_cauchy_b") or plugin.params.get("ext_cauchy_b"):
             out.append(f"{plugin.loc or desc.path}: warning: {_where(plugin)} is dispersive "
                        f"(Cauchy B term), which only spectral variants render; the `{variant}` "
