@@ -54,6 +54,8 @@ from ..ir import (
     UnpolarizedType,
     Value,
     VecType,
+    clone_block,
+    components,
     replace_uses,
 )
 from . import Pass, register
@@ -191,6 +193,9 @@ class Lift(Pass):
             a.type = self.lift_type(a.type)
         out: list[Instr] = []
         for ins in block.instrs:
+            if self.mueller is not None and ins.op is Op.LOOP:
+                out.extend(self.mueller.loop(self, ins, mapping))
+                continue
             for r in ins.regions:
                 self._block(r, mapping)
             for r in ins.results:
@@ -210,6 +215,12 @@ class Lift(Pass):
                 replaced = self._rewrite(ins, b, ops)
             if replaced is None:
                 out.append(ins)
+                if self.mueller is not None:
+                    if ins.op is Op.IF:
+                        out.extend(self.mueller.merge(ins, mapping))
+                    else:
+                        self.mueller.track(ins, b, ops)
+                        out.extend(b.block.instrs)
             else:
                 out.extend(b.block.instrs)
                 mapping[ins.result] = replaced
@@ -321,6 +332,7 @@ class _Mueller:
         self.type = model.concrete()
         self.entries: dict[Value, list[Value | None]] = {}
         self.scalar: dict[Value, Value] = {}
+        self.parts: dict[Value, Any] = {}  # shapes of structs and tuples holding matrices
 
     def is_mueller(self, v: Value) -> bool:
         return isinstance(v.type, StructType) and v.type.name == "Mueller"
@@ -376,6 +388,108 @@ class _Mueller:
                     acc = t if acc is None else b.op(Op.ADD, self.base, acc, t)
                 out.append(acc)
         return out
+
+    # -- what is known across control flow -----------------------------------------------
+    # A shape says what is known of a value holding matrices: for a matrix, which entries
+    # may be non-zero and whether it is u * identity (``MShape``); for a struct or tuple,
+    # the shapes of its fields (None for a field without matrices).
+    def full(self, t: Type) -> Any:
+        """The shape of a value of type ``t`` of which nothing is known."""
+        if isinstance(t, StructType) and t.name == "Mueller":
+            return (True,) * 16, False
+        if isinstance(t, (StructType, TupleType)):
+            parts = tuple(self.full(c) for c in components(t))
+            return parts if any(p is not None for p in parts) else None
+        return None
+
+    def shape(self, v: Value) -> Any:
+        if self.is_mueller(v):
+            e = self.entries.get(v)
+            nonzero = (True,) * 16 if e is None else tuple(x is not None for x in e)
+            return nonzero, v in self.scalar
+        return self.parts.get(v) or self.full(v.type)
+
+    def assume(self, b: Builder, v: Value, shape: Any) -> None:
+        """Record that ``v`` has ``shape`` (matrix entries are read from ``v`` itself)."""
+        if shape is None:
+            return
+        if not self.is_mueller(v):
+            self.parts[v] = shape
+            return
+        nonzero, scalar = shape
+        entries = [b.op(Op.EXTRACT, self.base, v, index=i) if nz else None
+                   for i, nz in enumerate(nonzero)]
+        self.entries[v] = entries
+        if scalar:
+            self.scalar[v] = entries[0]
+
+    def join(self, x: Any, y: Any) -> Any:
+        if x is None:
+            return None
+        if len(x) == 2 and isinstance(x[1], bool):  # a matrix
+            return tuple(p or q for p, q in zip(x[0], y[0])), x[1] and y[1]
+        return tuple(self.join(p, q) for p, q in zip(x, y))
+
+    def track(self, ins: Instr, b: Builder, ops: list[Value]) -> None:
+        """Follow shapes into and out of structs and tuples (a BSDF sample's weight)."""
+        r = ins.results[0] if len(ins.results) == 1 else None
+        if r is None or self.is_mueller(r) and ins.op is not Op.EXTRACT:
+            return
+        if ins.op is Op.MAKE and self.full(r.type) is not None:
+            self.parts[r] = tuple(self.shape(v) if self.full(v.type) is not None else None
+                                  for v in ops)
+        elif ins.op is Op.INSERT and ops[0] in self.parts:
+            parts = list(self.parts[ops[0]])
+            parts[ins.attrs["index"]] = self.shape(ops[1])
+            self.parts[r] = tuple(parts)
+        elif ins.op is Op.EXTRACT and ops[0] in self.parts:
+            self.assume(b, r, self.parts[ops[0]][ins.attrs["index"]])
+
+    def merge(self, ins: Instr, mapping: dict[Value, Value]) -> list[Instr]:
+        """After an ``if``: a result has the zeros both branches agree on (so a dispatch
+        over depolarizing BSDFs still yields a depolarizer)."""
+        b = Builder(Block(), ins.loc)
+        for k, r in enumerate(ins.results):
+            if self.full(r.type) is not None:
+                ys = [mapping.get(v, v) for v in (reg.instrs[-1].operands[k]
+                                                  for reg in ins.regions)]
+                shape = self.shape(ys[0])
+                for y in ys[1:]:
+                    shape = self.join(shape, self.shape(y))
+                self.assume(b, r, shape)
+        return b.block.instrs
+
+    def loop(self, lift: Lift, ins: Instr, mapping: dict[Value, Value]) -> list[Instr]:
+        """Lift a loop whose carried matrices keep known zeros: assume each starts as its
+        initial value's shape, lift the body, and widen the assumption to what the body
+        yields until it holds (as Dr.Jit removes constant loop state).  The path tracer's
+        throughput thus stays a depolarizer in a scene of depolarizing BSDFs, and the Stokes
+        frame rotations around them vanish."""
+        original = ins.regions[0]
+        inits = [mapping.get(v, v) for v in ins.operands]
+        carried = {k: self.shape(v) for k, v in enumerate(inits)
+                   if self.full(v.type) is not None}
+        while True:
+            body = clone_block(original, {})
+            head = Builder(Block(), ins.loc)
+            for k, shape in carried.items():
+                a = body.args[k]
+                a.type = lift.lift_type(a.type)
+                self.assume(head, a, shape)
+            lift._block(body, mapping)
+            body.instrs[:0] = head.block.instrs
+            ys = [mapping.get(v, v) for v in body.instrs[-1].operands[1:]]
+            wider = {k: self.join(s, self.shape(ys[k])) for k, s in carried.items()}
+            if wider == carried:
+                break
+            carried = wider
+        ins.regions[0] = body
+        for r in ins.results:
+            r.type = lift.lift_type(r.type)
+        after = Builder(Block(), ins.loc)
+        for k, shape in carried.items():
+            self.assume(after, ins.results[k], shape)
+        return [ins, *after.block.instrs]
 
     # -- the ops -------------------------------------------------------------------------
     def rewrite(self, lift: Lift, ins: Instr, b: Builder, ops: list[Value]) -> Value | None:
