@@ -19,6 +19,11 @@ int_ior=1.33)``, with Python values for the parameters:
   ``mueller=True``;
 * :meth:`Harness.disperses` is the BSDF's ``disperses()`` (false when it has none): the path
   integrator then multiplies its throughput by (4, 0, 0, 0) once (stdlib/dispersion.rdsl).
+
+:class:`SceneBsdfs` does the same for the BSDFs of a scene file's shapes, combinators
+(``twosided``, ``blendbsdf``, ``mask``) included, flattened as the renderer flattens them
+(runtime/render/bsdfs.py) and compiled into one module: ``SceneBsdfs(path, variant)[k]`` is
+shape k's BSDF, a :class:`Harness` whose parameters are the scene's.
 """
 
 from __future__ import annotations
@@ -32,6 +37,8 @@ import numpy as np
 import rdsl
 from rdsl.compiler.passes.specialize import Instance, SceneSpec, SpectrumValue, parameter_slots
 from rdsl.runtime import spectral as S
+from rdsl.runtime.render.bsdfs import BSDF_PLUGINS, bsdf_instance, split_leaves
+from rdsl.runtime.scene.loader import load_scene_description
 
 VARIANTS = ("mono", "rgb", "spectral", "mono_polarized", "spectral_polarized")
 STDLIB = Path(rdsl.__file__).resolve().parent / "stdlib"
@@ -42,7 +49,7 @@ _GOLDEN = 0.6180339887498949
 
 SOURCE = """import render.scene;
 import spectral;
-import bsdf.{name};
+{imports}
 
 fn h_sample(id: Int, si: Surface, u1: Float, u2: Vec2, ul: Float, T: [Float]) -> BsdfSample {{
     let w = sample_wavelengths(ul);
@@ -96,6 +103,8 @@ def default_ul(n: int) -> np.ndarray:
 class Harness:
     """Plugin ``name`` in ``variant`` through the scene dispatch (see the module docstring)."""
 
+    ident = 0  # the scene's BSDF that the kernels call
+
     def __init__(self, name: str, variant: str = "rgb", target: str = "host") -> None:
         self.name, self.variant, self.target = name, variant, target
         self.polarized = variant.endswith("_polarized")
@@ -122,7 +131,8 @@ class Harness:
         spec, prm = parameter_slots(scene, self.variant)
         key = repr(spec)
         if key not in self._mods:
-            self._mods[key] = rdsl.jit(SOURCE.format(name=self.name), target=self.target,
+            self._mods[key] = rdsl.jit(SOURCE.format(imports=f"import bsdf.{self.name};"),
+                                       target=self.target,
                                        variant=self.variant, scene=spec)
         return self._mods[key], np.asarray(prm if len(prm) else np.zeros(1), f32)
 
@@ -131,7 +141,8 @@ class Harness:
         k = mod[kernel]
         ul = default_ul(n) if ul is None else np.broadcast_to(np.asarray(ul, f32), (n,))
         extra = [prm] if any(p["name"] == "PRM" for p in k.info["params"]) else []
-        return k(np.zeros(n, np.int32), *args, np.ascontiguousarray(ul), np.zeros(1, f32),
+        return k(np.full(n, self.ident, np.int32), *args, np.ascontiguousarray(ul),
+                 np.zeros(1, f32),
                  *extra)
 
     # -- the plugin's interface ----------------------------------------------------------
@@ -180,6 +191,39 @@ class Harness:
         if plugin != self.name or method not in ("sample", "eval", "pdf"):
             raise KeyError(key)
         return getattr(self, method)
+
+
+class SceneBsdfs:
+    """The BSDFs of the shapes of scene file ``path`` in ``variant``, compiled into one module
+    with their parameters folded (see the module docstring); ``self[k]`` is shape k's."""
+
+    def __init__(self, path: str | Path, variant: str, target: str = "host") -> None:
+        desc = load_scene_description(path)
+        bsdfs, leaves = split_leaves([bsdf_instance(shape.bsdf) for shape in desc.shapes])
+        imports = sorted({BSDF_PLUGINS[i.plugin] for i in [*bsdfs, *leaves]})
+        self.variant, self.target = variant, target
+        self.module = rdsl.jit(SOURCE.format(imports="".join(f"import {m};\n" for m in imports)),
+                               target=target, variant=variant,
+                               scene=SceneSpec(bsdfs=bsdfs, bsdf_leaves=leaves))
+        self.count = len(bsdfs)
+
+    def __getitem__(self, k: int) -> Harness:
+        if not 0 <= k < self.count:
+            raise IndexError(k)
+        return _SceneBsdf(self, k)
+
+
+class _SceneBsdf(Harness):
+    """Shape k's BSDF of a :class:`SceneBsdfs`: its parameters are the scene's."""
+
+    def __init__(self, owner: SceneBsdfs, k: int) -> None:
+        super().__init__("mixture", owner.variant, owner.target)
+        self.owner, self.ident = owner, k
+
+    def module(self, params: dict[str, Any]) -> tuple[Any, np.ndarray]:
+        if params:
+            raise TypeError(f"a scene's BSDF takes the scene's parameters, not {sorted(params)}")
+        return self.owner.module, np.zeros(1, f32)
 
 
 # ---------------------------------------------------------------------- colours per variant
