@@ -93,6 +93,27 @@ fn product(a: Float, b: Float) -> Vec4 {
     }
     return out;
 }
+// unpolarized light of intensity 1 through n elements, carried by a loop as the path
+// tracer carries its throughput: the first `depol` are depolarizers of transmittance 1/2,
+// the others ideal polarizers, the k-th turned by k * step degrees
+fn chain(n: Int, depol: Int, step: Float) -> Vec4 {
+    var out = Vec4(0.0);
+    if const polarized {
+        let fwd = Vec3(0.0, 0.0, 1.0);
+        var t = Spectrum(1.0);
+        var k = 0;
+        while k < n {
+            var m = depolarizer(Unpolarized(0.5));
+            if k >= depol {
+                m = polarizer_mueller(fwd, Float(k) * step * deg_to_rad(), 1.0);
+            }
+            t = m * t;
+            k += 1;
+        }
+        out = stokes(t);
+    }
+    return out;
+}
 """
 
 
@@ -128,6 +149,26 @@ def test_quarter_wave_plate_makes_circular_light(kern):
     assert qwp[3] / qwp[0] == pytest.approx(1.0, abs=1e-6)  # Mitsuba's retarder sign
     assert hwp[2] / hwp[0] == pytest.approx(1.0, abs=1e-6)  # -45 deg -> +45 deg
     assert none[2] / none[0] == pytest.approx(-1.0, abs=1e-6)
+
+
+def test_loop_carried_matrix_widens_when_polarizers_appear(kern):
+    """The lift pass assumes a loop-carried matrix keeps its initial value's zeros until the
+    loop body shows otherwise: here the throughput is a scalar, then a depolarizer, and only
+    from iteration `depol` on a full matrix.  Wrong assumptions would drop the polarization
+    the polarizers build up; the result must follow Malus's law through the chain:
+    I = 0.5^depol * 0.5 * cos^2(step)^(number of polarizers - 1), fully linearly polarized."""
+    n = np.array([0, 1, 3, 3, 5, 6, 6], np.int32)
+    depol = np.array([0, 0, 0, 2, 1, 3, 6], np.int32)
+    step = np.array([10.0, 20.0, 30.0, 40.0, 25.0, 50.0, 5.0], f32)
+    s = kern.chain(n, depol, step)
+    polarizers = np.maximum(n - depol, 0)
+    expect = 0.5 ** np.minimum(depol, n) * np.where(
+        polarizers > 0, 0.5 * np.cos(np.radians(step.astype(np.float64))) ** (
+            2 * np.maximum(polarizers - 1, 0)), 1.0)
+    np.testing.assert_allclose(s[:, 0], expect, rtol=2e-6)
+    linear = np.hypot(s[:, 1], s[:, 2])
+    np.testing.assert_allclose(linear, np.where(polarizers > 0, s[:, 0], 0.0), atol=1e-6)
+    np.testing.assert_allclose(s[:, 3], 0.0, atol=1e-7)
 
 
 def _fresnel_amplitudes(cos_i: np.ndarray, eta: complex) -> tuple[np.ndarray, np.ndarray]:
@@ -194,6 +235,32 @@ def test_unpolarized_builds_have_no_mueller_arithmetic(plugin):
     for variant in POLARIZED:
         text = _ir(path, variant)
         assert "%Mueller" in text and "spec." not in text and "spectrum" not in text
+
+
+def test_depolarizing_scene_compiles_to_the_mono_kernel(tmp_path):
+    """A scene whose BSDFs all depolarize (the Cornell box: diffuse only) needs no Mueller
+    arithmetic in mono_polarized: the zeros of the BSDF matrices, known in each plugin, survive
+    the scene's BSDF dispatch, the BSDF sample struct and the path loop's throughput, and the
+    Stokes frame rotations vanish.  The kernel must then be the mono kernel, op for op, and
+    render the same image."""
+    from collections import Counter
+
+    from rdsl.compiler.driver import compile_kernels
+
+    cbox = Path(__file__).resolve().parents[2] / "shared" / "scenes" / "cbox" / "cbox.xml"
+    if not cbox.is_file():
+        pytest.skip(f"{cbox} is not present")
+    pytest.importorskip("rdsl.runtime.embree")
+    ops, images = {}, {}
+    for variant in ("mono", "mono_polarized"):
+        scene = rdsl.load_scene(cbox, variant=variant, res=24)
+        images[variant] = scene.render(spp=4, seed=3)
+        module, _ = compile_kernels(scene.kernel_src, target="scalar", variant=variant,
+                                    scene=scene.scene_spec)
+        ops[variant] = Counter(i.op.value for i in module.functions["render_sample"].walk())
+    assert sum(ops["mono"].values()) > 1000
+    assert ops["mono_polarized"] == ops["mono"]
+    np.testing.assert_array_equal(images["mono_polarized"], images["mono"])
 
 
 def test_polarized_kernel_size():
