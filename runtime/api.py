@@ -179,7 +179,10 @@ def jit(source_or_path: str | os.PathLike, target: str = "host", variant: str = 
     tgt = get_target(target)
     text = _source_text(source_or_path)
     files = [Path(f) for f in source_files(source_or_path)]
-    key = cache_key(text, files, tgt.name, variant, tgt.width, options)
+    # the file name only labels diagnostics, and a cached build had none: scenes copied to
+    # another directory share their kernels
+    keyed = {k: v for k, v in options.items() if k != "filename"}
+    key = cache_key(text, files, tgt.name, variant, tgt.width, keyed)
     root = cache_dir()
     entry = root / key
     if cache and entry_complete(entry):

@@ -27,3 +27,17 @@ def test_second_load_is_cached_and_imports_are_keyed(tmp_path, monkeypatch):
     third = rdsl.jit(main, target="scalar")
     assert not third.from_cache
     np.testing.assert_array_equal(third.f(x), 3 * x + 1)
+
+
+def test_source_text_under_another_file_name_is_a_hit(tmp_path, monkeypatch):
+    """The `filename` option only labels diagnostics: the same kernels compiled for a scene
+    copied elsewhere load from the cache (each test's tmp_path would recompile otherwise),
+    while other options still miss."""
+    monkeypatch.setenv("RDSL_CACHE_DIR", str(tmp_path / "cache"))
+    src = "fn f(x: Float) -> Float { return x * x; }\n"
+    first = rdsl.jit(src, target="scalar", filename=str(tmp_path / "a" / "scene.rdsl"))
+    second = rdsl.jit(src, target="scalar", filename=str(tmp_path / "b" / "scene.rdsl"))
+    other = rdsl.jit(src, target="scalar", variant="mono", filename="scene.rdsl")
+    assert not first.from_cache and second.from_cache and not other.from_cache
+    x = np.arange(4, dtype=np.float32)
+    np.testing.assert_array_equal(second.f(x), x * x)
