@@ -9,8 +9,9 @@ by the uniform emitter choice, as the integrator makes it):
   formula, pi L (R/d)^2 cos for a sphere, pi L R^2 / (h^2 + R^2) on a disk's axis,
   I cos / r^2 for point and spot, E cos for directional, pi L for the sky);
 - where the pdf is a density, the sampled directions pass a chi-square test against the pdf
-  computed here in numpy from the emitter's geometry (area sampling: dist^2 / (cos A), the
-  sky: 1 / 4 pi), and the pdf the integrator evaluates when a ray hits the emitter
+  computed here in numpy from the emitter's geometry (area sampling: dist^2 / (cos A); the
+  sphere, seen from outside, is sampled uniformly over the cone it subtends, as in Mitsuba 3:
+  1 / (2 pi (1 - cos theta_max)); the sky: 1 / 4 pi), and the pdf the integrator evaluates when a ray hits the emitter
   (`area_emitter_pdf`, `environment_pdf`, used for MIS) equals the pdf of the sample.
 """
 
@@ -51,7 +52,7 @@ fn estimate(p: Vec3, u: Vec2, upick: Float, nemitter: Int, env: Int, P: [Float],
             geom = h.geom;
             let it = interaction(ray, h, P, N, UV, F, G);
             if it.emitter >= 0 {
-                pdf_hit = area_emitter_pdf(it.emitter, h.t, it.si.wi, nemitter, E);
+                pdf_hit = area_emitter_pdf(it.emitter, ray.o, h.t, it.si.wi, nemitter, P, EK, E);
             }
         } else if env >= 0 {
             pdf_hit = environment_pdf(env, d, nemitter, EK, E, ENV);
@@ -147,16 +148,28 @@ def pdf_rectangle(scene, w: np.ndarray) -> np.ndarray:
     return np.where(inside, t * t / (cos_l * area), 0.0), cos_l
 
 
+def sphere_cone() -> tuple[np.ndarray, float, float]:
+    """The cone of directions from p = 0 to the sphere: axis, cos theta_max, uniform pdf."""
+    dc = np.linalg.norm(SPHERE_C)
+    cos_max = math.sqrt(1 - (SPHERE_R / dc) ** 2)
+    return SPHERE_C / dc, cos_max, 1 / (2 * math.pi * (1 - cos_max))
+
+
 def pdf_sphere(w: np.ndarray) -> np.ndarray:
-    c = SPHERE_C - ORIGIN
-    b = w @ c
-    disc = b * b - (c @ c - SPHERE_R ** 2)
-    t = b - np.sqrt(np.maximum(disc, 0))  # the near side: the samples that face p
-    y = w * t[:, None]
-    cos_l = np.abs(np.sum((y - c) * w, 1)) / SPHERE_R
-    area = 4 * math.pi * SPHERE_R ** 2
-    with np.errstate(divide="ignore", invalid="ignore"):
-        return np.where((disc > 0) & (t > 0), t * t / (cos_l * area), 0.0), cos_l
+    axis, cos_max, pdf = sphere_cone()
+    return np.where(w @ axis >= cos_max - 1e-6, pdf, 0.0), np.ones(len(w))
+
+
+def cone_quadrature(n: int = 400) -> tuple[np.ndarray, np.ndarray]:
+    """Directions of equal solid angle filling the sphere's cone, and their mass."""
+    axis, cos_max, _ = sphere_cone()
+    z = cos_max + (np.arange(n) + 0.5) / n * (1 - cos_max)
+    phi = (np.arange(2 * n) + 0.5) / (2 * n) * 2 * np.pi
+    zz, pp = np.meshgrid(z, phi, indexing="ij")
+    s = np.sqrt(1 - zz * zz)
+    local = np.stack([s * np.cos(pp), s * np.sin(pp), zz], -1).reshape(-1, 3)
+    w = local @ cap_frame(axis)
+    return w, np.full(len(w), 1.0 / len(w))
 
 
 def pdf_disk(w: np.ndarray) -> np.ndarray:
@@ -193,15 +206,6 @@ def surface_quadrature(points: np.ndarray, normals: np.ndarray) -> tuple[np.ndar
     facing = np.sum(normals * -points, 1) > 0
     w = points / np.linalg.norm(points, axis=1, keepdims=True)
     return w[facing], np.full(int(facing.sum()), 1.0 / len(points))
-
-
-def sphere_points(n: int = 1000) -> tuple[np.ndarray, np.ndarray]:
-    z = (np.arange(n) + 0.5) / n * 2 - 1  # equal-area bands (Archimedes)
-    phi = (np.arange(2 * n) + 0.5) / (2 * n) * 2 * np.pi
-    zz, pp = np.meshgrid(z, phi, indexing="ij")
-    s = np.sqrt(1 - zz * zz)
-    nrm = np.stack([s * np.cos(pp), s * np.sin(pp), zz], -1).reshape(-1, 3)
-    return SPHERE_C + SPHERE_R * nrm, nrm
 
 
 def disk_points(n: int = 800) -> tuple[np.ndarray, np.ndarray]:
@@ -298,10 +302,11 @@ def test_sampled_directions_follow_the_pdf(sampled, name):
         own = valid & (out["geom"] < 0)  # rays that reach the sky
         pdf, cos_l = np.full(int(own.sum()), 1 / (4 * math.pi)), np.ones(int(own.sum()))
     else:
-        points = {"sphere": sphere_points, "disk": disk_points,
-                  "rectangle": lambda: rect_points(scene)}[name]()
-        quad = surface_quadrature(*points)
-        axis = points[0].mean(axis=0)
+        if name == "sphere":
+            quad, axis = cone_quadrature(), sphere_cone()[0]
+        else:
+            points = {"disk": disk_points, "rectangle": lambda: rect_points(scene)}[name]()
+            quad, axis = surface_quadrature(*points), points[0].mean(axis=0)
         own = valid & (out["geom"] == i)  # the emitter's shape has geometry id i
         w = out["d"][own].astype(np.float64)
         pdf, cos_l = {"sphere": pdf_sphere, "disk": pdf_disk,

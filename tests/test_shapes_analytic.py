@@ -367,6 +367,23 @@ def test_area_emitting_sphere_and_disk_light_a_plane(tmp_path, light, expected, 
     np.testing.assert_allclose(img.mean(axis=(0, 1)), RHO / math.pi * expected, rtol=1.5e-2)
 
 
+@pytest.mark.parametrize("integrator", ["path", "direct"])
+def test_a_white_sphere_light_does_not_light_itself(tmp_path, integrator):
+    """A sphere is convex: light it emits never returns to it.  A white diffuse emitting
+    sphere alone in the dark therefore shows exactly its radiance.  Emitter sampling from a
+    point on the sphere must find nothing there: the cone the sphere subtends degenerates into
+    that point (seen from on the surface), where sampling it would give a pdf of about
+    1 / 2 pi to a vanishing patch and a bright self-lit halo."""
+    white = '<bsdf type="diffuse"><rgb name="reflectance" value="1"/></bsdf>'
+    light = f"""<shape type="sphere"><float name="radius" value="0.5"/>{white}
+        <emitter type="area"><rgb name="radiance" value="2"/></emitter></shape>"""
+    # the narrow view sees the sphere only
+    scene = load_scene(write_scene(tmp_path, light, fov=4.0, res=8, integrator=integrator))
+    img = scene.render(spp=64, seed=3)
+    assert scene.nonfinite == 0
+    np.testing.assert_allclose(img, 2.0, rtol=1e-5)
+
+
 def test_mitsuba_sphere_rules(tmp_path):
     # a non-uniform scale is warned about (as Mitsuba) and the sphere keeps |to_world x|
     shapes = """<shape type="sphere"><transform name="to_world"><scale x="2" y="1" z="1"/>
