@@ -158,6 +158,56 @@ def test_textures_where_they_cannot_go_are_clear_errors(tmp_path, bsdf, words):
     assert "scene.xml" in str(e.value)
 
 
+# ---- blend weights and mask opacities from textures ----------------------------------------
+
+GLOSSY = ('<bsdf type="roughconductor"><float name="alpha" value="0.3"/>'
+          '<rgb name="specular_reflectance" value="0.9, 0.8, 0.3"/></bsdf>')
+MATTE = '<bsdf type="diffuse"><rgb name="reflectance" value="0.2, 0.4, 0.8"/></bsdf>'
+
+
+def blend_xml(weight: str) -> str:
+    return f'<bsdf type="blendbsdf">{weight}{MATTE}{GLOSSY}</bsdf>'
+
+
+def mask_xml(opacity: str, inner: str = MATTE) -> str:
+    return f'<bsdf type="mask">{opacity}{inner}</bsdf>'
+
+
+def const(name: str, v: float) -> str:
+    return f'<float name="{name}" value="{v!r}"/>'
+
+
+@pytest.mark.parametrize("make, name", [(blend_xml, "weight"), (mask_xml, "opacity")])
+def test_textured_blend_weight_and_mask_opacity(tmp_path, make, name):
+    """blendbsdf's weight and mask's opacity read the texture's one-value lookup (`eval_1`,
+    as Mitsuba): each checker region renders as the constant weight of that region."""
+    a, b = (render(tmp_path, plane(make(const(name, v)))) for v in (A0, A1))
+    for tex in (checker(name), bitmap(tmp_path, name)):
+        assert_regions(render(tmp_path, plane(make(tex))), a, b)
+
+
+def test_two_textured_weights_in_one_tree_and_the_generic_build(tmp_path):
+    """A mask with a textured opacity around a blend with a textured weight (two texture
+    slots of one mixture): the regions are the four constant combinations, here along the
+    diagonal (both checkerboards share the layout: A0 with A0, A1 with A1).  The generic
+    build gives the same image."""
+    def tree(opacity: str, weight: str) -> str:
+        return plane(mask_xml(opacity, blend_xml(weight)))
+
+    a = render(tmp_path, tree(const("opacity", A0), const("weight", A0)))
+    b = render(tmp_path, tree(const("opacity", A1), const("weight", A1)))
+    textured = tree(checker("opacity"), checker("weight"))
+    assert_regions(render(tmp_path, textured), a, b)
+    np.testing.assert_allclose(render(tmp_path, textured, specialize=False),
+                               render(tmp_path, textured), atol=1e-6)
+    three = plane(mask_xml(checker("opacity"), f'<bsdf type="blendbsdf">{checker("weight")}'
+                           f'{MATTE}{blend_xml(checker("weight"))}</bsdf>'))
+    path = tmp_path / "three.xml"
+    path.write_text(scene_xml(three))
+    with pytest.raises(CompileError, match="at most 2 weights or opacities from textures"):
+        load_scene(path).compile()
+
+
 # ---- an area emitter's radiance from a texture ------------------------------------------
 
 L0, L1 = np.array([4.0, 1.0, 0.5]), np.array([0.5, 2.0, 6.0])  # above 1: stored scaled

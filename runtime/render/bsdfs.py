@@ -18,7 +18,9 @@ weights and opacities on its path; ``twosided(x, y)`` routes each side to one of
 whether it sees directions from below mirrored (a ``twosided`` on its path), plus the
 pass-through of ``mask``.  The Int parameters ``a`` .. ``d`` are the ids of the nested BSDFs
 among the scene's *leaves* (``SceneSpec.bsdf_leaves``, dispatched by
-``stdlib/render/bsdf_leaf.rdsl``).
+``stdlib/render/bsdf_leaf.rdsl``).  A blend weight or opacity set by a texture (at most two
+per tree) is not folded into the coefficients: it becomes the mixture's ``w0``/``w1``, and
+``factors`` says which terms it multiplies, as ``w`` or ``1 - w``.
 """
 
 from __future__ import annotations
@@ -46,9 +48,7 @@ BSDF_PLUGINS = {"diffuse": "bsdf.diffuse", "roughconductor": "bsdf.roughconducto
 COMBINATORS = ("twosided", "blendbsdf", "mask")  # Mitsuba's, all rdsl's `mixture`
 LEAF_PARAMS = ("a", "b", "c", "d")  # the mixture's parameters that hold leaf ids
 MAX_TERMS = len(LEAF_PARAMS)  # nested BSDFs one combinator tree may hold
-# every parameter of the mixture_*_buffers functions (which have no defaults)
-MIXTURE = {"a": 0, "b": 0, "c": 0, "d": 0, "above": (0.0,) * 4, "below": (0.0,) * 4,
-           "mirror": 0, "null_above": 0.0, "null_below": 0.0}
+TEXTURED_WEIGHTS = 2  # textured blend weights / mask opacities one combinator tree may hold
 DISTRIBUTIONS = {"ggx": 0, "beckmann": 1}
 TRANSMISSIVE = ("dielectric", "thindielectric", "roughdielectric", "polarizer", "retarder")
 # what a polarizing plugin does in an unpolarized render (as Mitsuba 3)
@@ -176,24 +176,33 @@ def bsdf_instance(plugin: Any, textures: Any = None) -> Instance:
     (``split_leaves`` numbers them)."""
     if plugin.type not in COMBINATORS:
         return leaf_instance(plugin, textures)
-    terms: list[_Term] = []
-    null = [0.0, 0.0]  # from above, from below
-    _flatten(plugin, 1.0, 1.0, False, False, terms, null)
-    terms = [t for t in terms if t.above > 0.0 or t.below > 0.0]
+    tree = _Tree(textures)
+    tree.flatten(plugin, 1.0, 1.0, (), False, False)
+    terms = [t for t in tree.terms if t.above > 0.0 or t.below > 0.0]
     if len(terms) > MAX_TERMS:
         raise CompileError(f"{_where(plugin)}: combinators that nest {len(terms)} BSDFs are not "
                            f"supported by the renderer yet (at most {MAX_TERMS})", plugin.loc)
     if not terms:  # fully transparent: a mixture whose one term has no share
-        terms = [_Term(_first_leaf(plugin), 0.0, 0.0, False)]
-    return Instance("mixture", mixture_params(
-        [(k, t.above, t.below, t.mirror) for k, t in enumerate(terms)], *null),
-        plugin.id or plugin.type, [leaf_instance(t.leaf, textures) for t in terms])
+        terms = [_Term(_first_leaf(plugin), 0.0, 0.0, (), False)]
+    null = [t for t in tree.null if t.above > 0.0 or t.below > 0.0]
+    if len({t.factors for t in null}) > 1:
+        raise CompileError(f"{_where(plugin)}: masks whose opacities come from different "
+                           "textures on different paths of one combinator tree are not "
+                           "supported by the renderer yet", plugin.loc)
+    factors = [t.factors for t in terms] + [null[0].factors if null else ()]
+    params = mixture_params([(k, t.above, t.below, t.mirror) for k, t in enumerate(terms)],
+                            sum(t.above for t in null), sum(t.below for t in null))
+    params["factors"] = sum(mode << (4 * i + 2 * j) for i, fs in enumerate(factors)
+                            for j, mode in fs)
+    params["w0"], params["w1"] = (tree.weights + [1.0, 1.0])[:TEXTURED_WEIGHTS]
+    return Instance("mixture", params, plugin.id or plugin.type,
+                    [leaf_instance(t.leaf, textures) for t in terms])
 
 
 def mixture_params(terms: list[tuple[int, float, float, bool]], null_above: float = 0.0,
                    null_below: float = 0.0) -> dict[str, Any]:
     """The ``mixture`` plugin's parameters for (leaf id, coefficient from above, from below,
-    mirrored from below) terms and the pass-through's coefficients."""
+    mirrored from below) terms and the pass-through's coefficients (no textured weights)."""
     assert len(terms) <= MAX_TERMS
     full = list(terms) + [(terms[0][0] if terms else 0, 0.0, 0.0, False)] * (MAX_TERMS -
                                                                              len(terms))
@@ -202,63 +211,88 @@ def mixture_params(terms: list[tuple[int, float, float, bool]], null_above: floa
     params["below"] = tuple(float(t[2]) for t in full)
     params["mirror"] = sum(1 << i for i, t in enumerate(full) if t[3])
     params["null_above"], params["null_below"] = float(null_above), float(null_below)
+    params["factors"], params["w0"], params["w1"] = 0, 1.0, 1.0
     return params
 
 
 @dataclass
 class _Term:
-    """A nested BSDF of a combinator tree with its coefficients seen from above and from
-    below, and whether it sees directions from below mirrored (it is inside a twosided)."""
+    """A nested BSDF of a combinator tree (or, in ``_Tree.null``, a share of the
+    pass-through) with its constant coefficients seen from above and from below, its
+    textured factors ((weight slot, 1: w or 2: 1 - w) pairs), and whether it sees directions
+    from below mirrored (it is inside a twosided)."""
 
     leaf: Any
     above: float
     below: float
+    factors: tuple[tuple[int, int], ...]
     mirror: bool
 
 
-def _flatten(plugin: Any, above: float, below: float, mirror: bool, in_twosided: bool,
-             terms: list[_Term], null: list[float]) -> None:
-    """Add the terms of ``plugin``'s subtree, reached with coefficients ``above`` and
-    ``below``; ``mirror``: the path from below has passed a twosided, which turned the
-    directions over (after that the subtree is seen from its front side only)."""
-    if plugin.type not in COMBINATORS:
-        if in_twosided and plugin.type in TRANSMISSIVE:
-            raise CompileError(f"{_where(plugin)}: only BSDFs without transmission can be "
-                               f"nested in twosided, not `{plugin.type}` (as Mitsuba)",
+class _Tree:
+    """The terms of a combinator tree, its pass-through shares and its textured weights."""
+
+    def __init__(self, textures: Any) -> None:
+        self.textures = textures
+        self.terms: list[_Term] = []
+        self.null: list[_Term] = []
+        self.weights: list[Any] = []  # TextureRefs of the textured weights, by slot
+
+    def weight(self, plugin: Any, name: str) -> tuple[float, float, int | None]:
+        """A blend weight or opacity w: the constant factors w and 1 - w and None, or 1, 1
+        and the weight's slot for a texture (then the factors are textured)."""
+        value = plugin.params[name]
+        if isinstance(value, (int, float)):
+            w = min(max(float(value), 0.0), 1.0)
+            return w, 1.0 - w, None
+        if getattr(value, "category", None) != "texture" or self.textures is None:
+            raise CompileError(f"{_where(plugin)}: cannot use {value!r} as `{name}`",
                                plugin.loc)
-        terms.append(_Term(plugin, above, below, mirror))
-        return
-    kids = plugin.children
-    if plugin.type == "blendbsdf":
-        w = min(max(_float(plugin, "weight"), 0.0), 1.0)
-        _flatten(kids[0], above * (1 - w), below * (1 - w), mirror, in_twosided, terms, null)
-        _flatten(kids[1], above * w, below * w, mirror, in_twosided, terms, null)
-    elif plugin.type == "mask":
-        o = min(max(_float(plugin, "opacity"), 0.0), 1.0)
-        null[0] += above * (1 - o)
-        null[1] += below * (1 - o)
-        _flatten(kids[0], above * o, below * o, mirror, in_twosided, terms, null)
-    elif len(kids) == 1 or mirror:
-        # twosided(x): from below, x sees mirrored directions; a twosided(x, y) already
-        # turned to its front side sees x only
-        _flatten(kids[0], above, below, True, True, terms, null)
-    else:  # twosided(x, y): x from above, y from below (mirrored)
-        _flatten(kids[0], above, 0.0, True, True, terms, null)
-        _flatten(kids[1], 0.0, below, True, True, terms, null)
+        if len(self.weights) == TEXTURED_WEIGHTS:
+            raise CompileError(f"{_where(plugin)}: a combinator tree may take at most "
+                               f"{TEXTURED_WEIGHTS} weights or opacities from textures in the "
+                               "renderer", plugin.loc)
+        self.weights.append(self.textures.ref(value, f"{plugin.type}.{name}", "scalar"))
+        return 1.0, 1.0, len(self.weights) - 1
+
+    def flatten(self, plugin: Any, above: float, below: float,
+                factors: tuple[tuple[int, int], ...], mirror: bool, in_twosided: bool) -> None:
+        """Add the terms of ``plugin``'s subtree, reached with coefficients ``above`` and
+        ``below`` and textured ``factors``; ``mirror``: the path from below has passed a
+        twosided, which turned the directions over (after that the subtree is seen from its
+        front side only)."""
+        if plugin.type not in COMBINATORS:
+            if in_twosided and plugin.type in TRANSMISSIVE:
+                raise CompileError(f"{_where(plugin)}: only BSDFs without transmission can be "
+                                   f"nested in twosided, not `{plugin.type}` (as Mitsuba)",
+                                   plugin.loc)
+            self.terms.append(_Term(plugin, above, below, factors, mirror))
+            return
+        kids = plugin.children
+        if plugin.type in ("blendbsdf", "mask"):
+            w, rest, slot = self.weight(plugin, "weight" if plugin.type == "blendbsdf"
+                                        else "opacity")
+            on = factors + ((slot, 1),) if slot is not None else factors
+            off = factors + ((slot, 2),) if slot is not None else factors
+            if plugin.type == "blendbsdf":
+                self.flatten(kids[0], above * rest, below * rest, off, mirror, in_twosided)
+                self.flatten(kids[1], above * w, below * w, on, mirror, in_twosided)
+            else:
+                self.null.append(_Term(None, above * rest, below * rest, off, mirror))
+                self.flatten(kids[0], above * w, below * w, on, mirror, in_twosided)
+        elif len(kids) == 1 or mirror:
+            # twosided(x): from below, x sees mirrored directions; a twosided(x, y) already
+            # turned to its front side sees x only
+            self.flatten(kids[0], above, below, factors, True, True)
+        else:  # twosided(x, y): x from above, y from below (mirrored)
+            self.flatten(kids[0], above, 0.0, factors, True, True)
+            self.flatten(kids[1], 0.0, below, factors, True, True)
 
 
 def _first_leaf(plugin: Any) -> Any:
     while plugin.type in COMBINATORS:
         plugin = plugin.children[0]
     return plugin
-
-
-def _float(plugin: Any, name: str) -> float:
-    value = plugin.params[name]
-    if not isinstance(value, (int, float)):
-        raise CompileError(f"{_where(plugin)}: a texture for `{name}` is not supported by the "
-                           "renderer yet", plugin.loc)
-    return float(value)
 
 
 def split_leaves(bsdfs: list[Instance]) -> tuple[list[Instance], list[Instance]]:
