@@ -303,6 +303,8 @@ class Op(enum.Enum):
     SPEC_AVG = "spec.avg"  # mean over the spectrum's components -> f32
     SPEC_MAX = "spec.max"  # max component -> f32
     SPEC_RGB = "spec.from_rgb"  # (r, g, b) f32 -> spectrum; attrs: illuminant, spectrum
+    SPEC_TABLE = "spec.table"  # buffer<f32>, i32 offset -> spectrum: a tabulated spectrum
+    # stored there (the generic build's PRM; spectral variants only, see passes/lift.py)
     SPEC_MAKE = "spec.make"  # one f32 per component (spectral: 4) -> spectrum
     SPEC_SET = "spec.set_wavelengths"  # spectrum: this sample's wavelengths (nm), no result
     SPEC_LAMBDA = "spec.wavelengths"  # -> spectrum: this sample's wavelengths (nm)

@@ -8,6 +8,9 @@ Conventions, as in Mitsuba 3.9 (``include/mitsuba/core/spectrum.h``, ``render/sr
 
 * Tabulated curves (CIE 1931, D65) are linear interpolants of 95 samples on 360..830 nm every
   5 nm and are 0 outside that range.
+* A scene's tabulated spectrum is the linear interpolant of its knots, 0 outside them
+  (``irregular``): :func:`tabulated`, which the kernels evaluate exactly from the cells of
+  :func:`tabulated_cells` (specialized builds) or :func:`tabulated_slot` (generic builds).
 * A film in a spectral variant turns a path's 4-wavelength sample into linear sRGB as
   ``XYZ_TO_SRGB @ mean_i(xyz(l_i) * value_i * weight_i) / CIE_Y_INTEGRAL``.
 * Reflectance RGB is upsampled with the Jakob & Hanika (2019) sigmoid-polynomial model:
@@ -19,6 +22,7 @@ Conventions, as in Mitsuba 3.9 (``include/mitsuba/core/spectrum.h``, ``render/sr
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from functools import lru_cache
 from pathlib import Path
 
@@ -259,17 +263,176 @@ def spectrum_to_srgb(values: np.ndarray, lam: np.ndarray, weight: np.ndarray) ->
     return xyz @ XYZ_TO_SRGB.T
 
 
-def resample(lam: np.ndarray, values: np.ndarray) -> np.ndarray:
-    """A tabulated spectrum (increasing wavelengths ``lam``) on the 95-sample 5 nm grid.
+# -- tabulated spectra ------------------------------------------------------------------------
+#
+# A scene's tabulated spectrum (a ``<spectrum>`` of wavelength:value pairs, a spectrum file, a
+# named conductor's complex IOR) is Mitsuba's ``irregular`` spectrum: the linear interpolant of
+# its knots, 0 outside them.  The spectral kernels evaluate it exactly from a table of cells:
+# regular cells over the wavelength range, each holding at most one knot ``b`` and the lines on
+# either side of it (5 floats a cell, see :class:`Cells`).
 
-    Mitsuba's ``irregular`` (and ``regular``) spectrum evaluates the linear interpolant of the
-    pairs inside ``[lam[0], lam[-1]]`` and 0 outside; this samples that at 360, 365, .., 830.
-    """
-    lam = np.asarray(lam, dtype=np.float64)
-    values = np.asarray(values, dtype=np.float64)
-    grid = LAMBDA_MIN + 5.0 * np.arange(CIE_SAMPLES)
-    inside = (grid >= lam[0]) & (grid <= lam[-1])
-    return np.where(inside, np.interp(grid, lam, values), 0.0)
+CELL_CAP = 4096  # most cells of a specialized build's table (knots closer than 470/4096 nm)
+CELL_FLOATS = 5
+GENERIC_CELLS = 470  # the generic build's cells: 1 nm over [360, 830]
+GENERIC_SLOT = 2 + CELL_FLOATS * GENERIC_CELLS  # its PRM floats: lo, hi, then the cells
+
+
+@dataclass(frozen=True)
+class Cells:
+    """A tabulated spectrum as a table of regular cells: ``count`` cells of ``width`` nm from
+    ``start``.  Row j of ``table`` (float32, shape (count, 5)) is the cell's knot ``b`` (or
+    one of its ends where it has none) and the lines left and right of it, each as its value
+    at ``b`` and its slope: ``f(l) = vl + (l - b) sl`` for ``l < b``, ``vr + (l - b) sr``
+    from ``b`` on.  The value is 0 outside [``lo``, ``hi``] (float32 bounds rounded inwards,
+    so that a float32 wavelength is inside exactly when it lies between the first and last
+    knot, and within 360..830 nm)."""
+
+    start: float
+    width: float
+    lo: float
+    hi: float
+    table: np.ndarray
+
+    @property
+    def count(self) -> int:
+        return int(self.table.shape[0])
+
+
+def _knots(lam: np.ndarray, values: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    w = np.asarray(lam, np.float64)
+    v = np.asarray(values, np.float64)
+    if w.ndim != 1 or w.shape != v.shape or not w.size or np.any(np.diff(w) <= 0):
+        raise ValueError("a tabulated spectrum needs as many values as wavelengths, and the "
+                         "wavelengths strictly increasing")
+    return w, v
+
+
+def _round_up(x: float) -> float:
+    """The smallest float32 >= x (as a float)."""
+    y = np.float32(x)
+    return float(y) if float(y) >= x else float(np.nextafter(y, np.float32(np.inf)))
+
+
+def _round_down(x: float) -> float:
+    y = np.float32(x)
+    return float(y) if float(y) <= x else float(np.nextafter(y, np.float32(-np.inf)))
+
+
+def _bounds(w: np.ndarray) -> tuple[float, float]:
+    """The float32 domain [lo, hi]: the knots' range within the visible 360..830 nm."""
+    lo, hi = max(float(w[0]), LAMBDA_MIN), min(float(w[-1]), LAMBDA_MAX)
+    return (_round_up(lo), _round_down(hi)) if lo <= hi else (1.0, 0.0)
+
+
+def tabulated(lam: np.ndarray, values: np.ndarray, wl: np.ndarray | float) -> np.ndarray:
+    """A tabulated spectrum (strictly increasing wavelengths ``lam``, ``values``) at ``wl``
+    (nm): Mitsuba's ``irregular`` spectrum, the linear interpolant of the pairs, 0 outside
+    [lam[0], lam[-1]] and (as the CIE curves, where spectral variants sample no wavelength)
+    outside [360, 830].  What the spectral kernels compute, to float32 rounding."""
+    w, v = _knots(lam, values)
+    wl = np.asarray(wl, np.float64)
+    inside = (wl >= max(w[0], LAMBDA_MIN)) & (wl <= min(w[-1], LAMBDA_MAX))
+    return np.where(inside, np.interp(wl, w, v), 0.0)
+
+
+def cell_table(lam: np.ndarray, values: np.ndarray, start: float, stop: float,
+               count: int) -> np.ndarray:
+    """The (count, 5) float32 cells of :class:`Cells` over [start, stop] for the interpolant
+    of the knots, extended by its end values beyond them (the domain test zeroes it there).
+
+    A cell with one knot strictly inside holds that knot, rounded up to float32 (so that
+    ``l >= b`` splits float32 wavelengths as the knot does), and each side's line exactly
+    (its value at the rounded knot, computed in float64): the table is then exact.  A cell
+    with none holds its line, referred to the end where it is smaller (so that a value near
+    0 keeps its relative precision).  A cell with several knots, where they are closer than
+    the cells are wide, keeps the one whose two-piece interpolant through the cell's ends
+    errs least at the others, which are dropped."""
+    w, v = _knots(lam, values)
+    x = start + (stop - start) * np.arange(count + 1) / count  # whole nm on the 1 nm grid
+    x[-1] = stop
+    slopes = np.concatenate([[0.0], np.diff(v) / np.diff(w), [0.0]])  # left of w[0]: 0
+    f0, f1 = np.interp(x[:-1], w, v), np.interp(x[1:], w, v)
+    first = np.searchsorted(w, x[:-1], side="right")  # the knots strictly inside a cell:
+    last = np.searchsorted(w, x[1:], side="left")  # w[first:last]
+    ref = np.where(f1 < f0, x[1:], x[:-1])
+    left = slopes[np.searchsorted(w, 0.5 * (x[:-1] + x[1:]))]
+    right = left.copy()
+    one = last - first == 1
+    ref[one] = w[first[one]]
+    left[one], right[one] = slopes[first[one]], slopes[first[one] + 1]
+    for j in np.flatnonzero(last - first > 1):
+        inner = w[first[j]:last[j]]
+        errs = []
+        for c in inner:
+            pieces = np.interp(inner, [x[j], c, x[j + 1]], [f0[j], np.interp(c, w, v), f1[j]])
+            errs.append(np.abs(pieces - v[first[j]:last[j]]).max())
+        c = float(inner[int(np.argmin(errs))])
+        fc = float(np.interp(c, w, v))
+        ref[j], left[j], right[j] = c, (fc - f0[j]) / (c - x[j]), (f1[j] - fc) / (x[j + 1] - c)
+    at = np.interp(ref, w, v)
+    rounded = np.array([_round_up(r) for r in ref])
+    shift = rounded - ref
+    return np.stack([rounded, at + shift * left, left, at + shift * right, right],
+                    axis=1).astype(np.float32)
+
+
+def tabulated_cells(lam: np.ndarray, values: np.ndarray) -> Cells | None:
+    """A specialized build's table of a tabulated spectrum, exact (to float32 rounding): cells
+    over its domain [lo, hi] no wider than the smallest spacing of the knots inside it, so
+    that no cell holds two.  Knots closer than (hi - lo) / CELL_CAP, the cells' cap, make
+    crowded cells, which keep one knot each (:func:`cell_table`).  None where the spectrum
+    lies outside 360..830 nm (it is 0 there)."""
+    w, v = _knots(lam, values)
+    lo, hi = _bounds(w)
+    if lo > hi:
+        return None
+    inner = w[(w > lo) & (w < hi)]
+    gap = float(np.diff(inner).min()) if inner.size > 1 else hi - lo
+    count = max(1, min(CELL_CAP, int(np.ceil((hi - lo) / gap)) if gap > 0 else 1))
+    while count < CELL_CAP:  # float64 rounding may leave a knot pair in one cell
+        x = lo + (hi - lo) * np.arange(count + 1) / count
+        crowded = np.searchsorted(w, x[1:], "left") - np.searchsorted(w, x[:-1], "right")
+        if crowded.max() <= 1:
+            break
+        count += 1
+    width = (hi - lo) / count if hi > lo else 1.0
+    return Cells(lo, width, lo, hi, cell_table(w, v, lo, hi, count))
+
+
+def tabulated_slot(lam: np.ndarray, values: np.ndarray) -> np.ndarray:
+    """A tabulated spectrum as the generic build stores it in ``PRM``: ``GENERIC_SLOT`` floats,
+    the domain's lo and hi and the :func:`cell_table` of 470 cells of 1 nm over [360, 830],
+    whatever the knots.  Exact unless a cell holds two knots strictly inside it (knots 1 nm
+    apart or more never do: the named conductors' are 5.4 nm apart at least); a crowded cell
+    keeps one knot (:func:`cell_table`)."""
+    w, v = _knots(lam, values)
+    lo, hi = _bounds(w)
+    table = cell_table(w, v, LAMBDA_MIN, LAMBDA_MAX, GENERIC_CELLS)
+    return np.concatenate([np.float32([lo, hi]), table.ravel()])
+
+
+def generic_cells(slot: np.ndarray) -> Cells:
+    """The :class:`Cells` a generic build reads from its ``PRM`` slot."""
+    slot = np.asarray(slot, np.float32)
+    return Cells(LAMBDA_MIN, (LAMBDA_MAX - LAMBDA_MIN) / GENERIC_CELLS, float(slot[0]),
+                 float(slot[1]), slot[2:].reshape(GENERIC_CELLS, CELL_FLOATS))
+
+
+def eval_cells(cells: Cells | None, wl: np.ndarray | float) -> np.ndarray:
+    """``cells`` at wavelengths ``wl`` in the kernels' float32 arithmetic (0 for None)."""
+    lam = np.asarray(wl, np.float32)
+    if cells is None:
+        return np.zeros(lam.shape)
+    f32 = np.float32
+    with np.errstate(invalid="ignore", over="ignore"):
+        t = (lam - f32(cells.start)) * f32(1.0 / cells.width)
+        j = np.clip(np.nan_to_num(t, nan=0.0, posinf=cells.count, neginf=0.0),
+                    0, cells.count - 1).astype(np.intp)
+    ref, vl, sl, vr, sr = (cells.table[j, k] for k in range(CELL_FLOATS))
+    side = lam >= ref
+    v = np.where(side, vr, vl) + (lam - ref) * np.where(side, sr, sl)
+    inside = (lam >= f32(cells.lo)) & (lam <= f32(cells.hi))
+    return np.where(inside, v, f32(0.0)).astype(np.float64)
 
 
 def _list_to_srgb(lam: np.ndarray, values: np.ndarray, under_d65: bool) -> np.ndarray:

@@ -239,8 +239,7 @@ def colour_at(variant: str, value: Any, wavelengths: np.ndarray | None) -> np.nd
     """What a colour parameter is per row and channel in `variant` (an independent numpy
     model): RGB, its luminance (mono), or its spectrum at the rows' wavelengths."""
     if isinstance(value, SpectrumValue) and value.samples is not None and wavelengths is not None:
-        grid = S.LAMBDA_MIN + 5.0 * np.arange(S.CIE_SAMPLES)
-        return np.interp(wavelengths, grid, S.resample(*map(np.asarray, value.samples)))
+        return S.tabulated(*value.samples, wavelengths)  # the knots' interpolant
     rgb = np.asarray(value.rgb if isinstance(value, SpectrumValue) else value, np.float64)
     if variant.startswith("mono"):
         return np.atleast_1d(rgb @ LUMINANCE)[None, :]

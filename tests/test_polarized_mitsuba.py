@@ -9,9 +9,9 @@ so this runs wherever the `mitsuba` package is installed; skipped without it).
    `mixture` (runtime/render/bsdfs.py) and called through the scene dispatch
    (tests/_bsdf_harness.py's SceneBsdfs): the Mueller matrices of eval() and sample() at
    every one of the four wavelengths, seen from both sides.  Conductors here have
-   wavelength-dependent `<spectrum>` values whose knots lie on rdsl's 5 nm grid, so that
-   both interpolate the same curve (a tabulated `material` is resampled to that grid by
-   rdsl, which differs from Mitsuba's interpolation by up to 1e-3 in the Mueller entries).
+   wavelength-dependent `<spectrum>` values, which rdsl evaluates as Mitsuba does: the linear
+   interpolant of their knots, exactly (any knots; these lie on multiples of 5 nm, which the
+   5 nm resampling rdsl once did left exact).
 
 Mitsuba's BSDFs return matrices in the local frame between the implicit bases
 stokes_basis(-wo) and stokes_basis(wi), as rdsl's do (tests/test_polarized.py).  Its twosided

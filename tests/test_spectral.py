@@ -81,37 +81,81 @@ def test_white_light_on_white_is_white():
     np.testing.assert_allclose(got, [1.0, 1.0, 1.0], atol=5e-3)
 
 
-def test_tabulated_spectrum_is_interpolated():
-    """A scene's `<spectrum>` reaches the kernel as its table, not as its RGB projection."""
-    from rdsl.compiler.passes.specialize import Instance, SceneSpec, SpectrumValue
+IOR = Path(rdsl.__file__).resolve().parent / "stdlib" / "data" / "ior"
 
-    wl, vals = (400.0, 500.0, 600.0, 700.0), (0.1, 0.9, 0.2, 0.6)
-    value = SpectrumValue((0.3, 0.3, 0.3), (wl, vals))
-    src = """
-    import spectral;
-    import render.scene;
-    fn k(u: Float, T: [Float]) -> Vec4 {
-        let w = sample_wavelengths(u);
-        var out = Vec4(0.0);
-        let s = Surface { p: Vec3(0.0), n: Vec3(0.0, 0.0, 1.0), sh_n: Vec3(0.0, 0.0, 1.0),
-                          uv: Vec2(0.0, 0.0), wi: Vec3(0.0, 0.0, 1.0), t: 1.0, valid: true };
-        let e = scene_emitter_eval(0, s, T);
-        if const spectral {
-            let l = wavelengths();
-            out = Vec4(max_value(l), max_value(e), mean(l), mean(e));
-        }
-        return out;
-    }
-    """
-    scene = SceneSpec(emitters=[Instance("area", {"radiance": value})])
-    src = "import emitter.area;\n" + src
-    got = rdsl.jit(src, target="avx2", variant="spectral", scene=scene).k(
-        U, np.zeros(3, np.float32))
-    lam, _ = S.sample_wavelengths(U.astype(np.float64))
-    grid = S.LAMBDA_MIN + 5.0 * np.arange(S.CIE_SAMPLES)
-    spec = np.interp(lam, grid, S.resample(wl, vals))
-    np.testing.assert_allclose(got[:, 1], spec.max(axis=1), rtol=1e-5, atol=1e-6)
-    np.testing.assert_allclose(got[:, 3], spec.mean(axis=1), rtol=1e-5, atol=1e-6)
+
+def _spd(name: str) -> tuple[tuple[float, ...], tuple[float, ...]]:
+    rows = [ln.split() for ln in (IOR / name).read_text().splitlines()
+            if ln.strip() and not ln.startswith("#")]
+    return tuple(float(r[0]) for r in rows), tuple(float(r[1]) for r in rows)
+
+
+# knots off the float32 grid, 0.75 nm apart at the closest, a drop to 0 and a range inside
+# 360..830 nm; and gold's complex IOR (stdlib/data/ior, as `material="Au"`), knots uniform in
+# photon energy, beyond 360..830 nm on both sides
+TABULATED = {
+    "user": ((412.3, 433.7, 441.0, 500.2, 600.25, 601.0, 650.0, 777.7),
+             (0.1, 0.9, 0.05, 0.0, 2.5, 0.3, 0.3, 1.2)),
+    "Au.eta": _spd("Au.eta.spd"),
+    "Au.k": _spd("Au.k.spd"),
+}
+TABULATED_SRC = """
+import spectral;
+import render.scene;
+import emitter.area;
+fn k(l0: Float, l1: Float, l2: Float, l3: Float, T: [Float]) -> Spectrum {
+    set_wavelengths(Spectrum(l0, l1, l2, l3));
+    let s = Surface { p: Vec3(0.0), n: Vec3(0.0, 0.0, 1.0), sh_n: Vec3(0.0, 0.0, 1.0),
+                      uv: Vec2(0.0, 0.0), wi: Vec3(0.0, 0.0, 1.0), t: 1.0, valid: true };
+    return scene_emitter_eval(0, s, T);
+}
+"""
+
+
+def _probe_wavelengths(knots: np.ndarray) -> np.ndarray:
+    """Every knot (as float32), the float32 wavelengths on either side of it, the ends of
+    360..830 nm and beyond them, and a dense sweep."""
+    k = knots.astype(np.float32)
+    near = [k, np.nextafter(k, np.float32(0)), np.nextafter(k, np.float32(1e4))]
+    ends = np.float32([300.0, 359.99997, 360.0, 360.00003, 829.99994, 830.0, 830.00006, 900.0])
+    sweep = np.linspace(350.0, 840.0, 4001, dtype=np.float32)
+    lam = np.concatenate([*near, ends, sweep])
+    return np.concatenate([lam, np.zeros(-len(lam) % 4, np.float32)])  # rows of 4
+
+
+@pytest.mark.parametrize("target,specialize", [("avx2", True), ("avx2", False),
+                                               ("scalar", True)])
+@pytest.mark.parametrize("name", list(TABULATED))
+def test_tabulated_spectrum_is_exact(name, target, specialize):
+    """A scene's tabulated spectrum (here an emitter's radiance) evaluates to the linear
+    interpolant of its knots at the sample's wavelengths, to float32 rounding, as Mitsuba's
+    `irregular` spectrum: at the knots, either side of them, at 360 and 830 nm; 0 outside the
+    knots and outside 360..830 nm.  Specialized (cells fitted to the knots) and generic
+    (fixed 1 nm cells read from PRM) builds alike."""
+    from rdsl.compiler.passes.specialize import (
+        Instance,
+        SceneSpec,
+        SpectrumValue,
+        parameter_slots,
+    )
+
+    wl, vals = map(np.asarray, TABULATED[name])
+    scene = SceneSpec(emitters=[Instance("area", {"radiance": SpectrumValue(
+        (0.3, 0.3, 0.3), (tuple(wl), tuple(vals)), illuminant=True)})])
+    extra = []
+    if not specialize:
+        scene, prm = parameter_slots(scene, "spectral")
+        extra = [prm]
+    mod = rdsl.jit(TABULATED_SRC, target=target, variant="spectral", scene=scene)
+    lam = _probe_wavelengths(wl).reshape(-1, 4)
+    got = mod.k(*lam.T, np.zeros(3, np.float32), *extra)
+    x = lam.astype(np.float64)
+    inside = (x >= max(wl[0], 360.0)) & (x <= min(wl[-1], 830.0))
+    want = np.where(inside, np.interp(x, wl, vals), 0.0)
+    np.testing.assert_array_equal(got[~inside], 0.0)
+    np.testing.assert_allclose(got, want, rtol=1e-6, atol=1e-7 * vals.max())
+    if name == "user":  # the probes include wavelengths in 360..830 nm beyond the knots
+        assert (~inside & (x > 360.0) & (x < 830.0)).any()
 
 
 def test_lift_gives_concrete_types():

@@ -6,6 +6,8 @@ wavelength density, the upsampling round trip, a fresh optimizer run, and, where
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -222,12 +224,89 @@ def test_optimizer_command_line(tmp_path):
 
 # -- tabulated spectra ----------------------------------------------------------------------
 
-def test_resample_is_linear_inside_and_zero_outside():
-    out = sp.resample([450.0, 550.0, 650.0], [0.3, 0.5, 0.1])
-    assert out.shape == (95,)
-    assert out[GRID == 445.0] == 0.0 and out[GRID == 655.0] == 0.0
-    assert out[GRID == 450.0] == pytest.approx(0.3) and out[GRID == 600.0] == pytest.approx(0.3)
-    assert out[GRID == 500.0] == pytest.approx(0.4)
+IOR = sorted((Path(sp.__file__).resolve().parents[1] / "stdlib" / "data" / "ior").glob("*.spd"))
+
+
+def read_spd(path: Path) -> tuple[np.ndarray, np.ndarray]:
+    rows = [ln.split() for ln in path.read_text().splitlines()
+            if ln.strip() and not ln.startswith("#")]
+    return np.array([float(r[0]) for r in rows]), np.array([float(r[1]) for r in rows])
+
+
+def knots_interpolant(w: np.ndarray, v: np.ndarray, lam: np.ndarray) -> np.ndarray:
+    """The truth: np.interp of the knots inside them and 360..830 nm, 0 elsewhere."""
+    lam = np.asarray(lam, np.float64)
+    inside = (lam >= max(w[0], 360.0)) & (lam <= min(w[-1], 830.0))
+    return np.where(inside, np.interp(lam, w, v), 0.0)
+
+
+def probes(w: np.ndarray) -> np.ndarray:
+    """float32 wavelengths: on each knot and either side of it, the ends of 360..830 nm, a
+    dense sweep beyond them."""
+    k = np.asarray(w, np.float32)
+    ends = np.float32([359.99997, 360.0, 360.00003, 829.99994, 830.0, 830.00006])
+    return np.concatenate([k, np.nextafter(k, np.float32(0)), np.nextafter(k, np.float32(1e4)),
+                           ends, np.linspace(350.0, 840.0, 49001, dtype=np.float32)])
+
+
+def test_tabulated_is_linear_inside_and_zero_outside():
+    w, v = [450.0, 550.0, 650.0], [0.3, 0.5, 0.1]
+    out = sp.tabulated(w, v, [449.9, 450.0, 500.0, 600.0, 650.0, 650.1])
+    np.testing.assert_allclose(out, [0.0, 0.3, 0.4, 0.3, 0.1, 0.0], rtol=1e-12)
+    # beyond 360..830 nm, where no wavelength is sampled, it is 0 like the CIE curves
+    np.testing.assert_array_equal(sp.tabulated([300.0, 900.0], [1.0, 1.0], [359.0, 831.0]), 0.0)
+
+
+SPECTRA = [(p.name, *read_spd(p)) for p in IOR] + [
+    ("user", np.array([412.3, 433.7, 441.0, 500.2, 600.25, 601.0, 650.0, 777.7]),
+     np.array([0.1, 0.9, 0.05, 0.0, 2.5, 0.3, 0.3, 1.2])),
+    ("5 nm grid", GRID[10:80], 0.5 + 0.4 * np.sin(GRID[10:80] / 17.0)),
+    ("0.5 nm grid", np.arange(380.0, 800.0, 0.5), 1.0 + 0.5 * np.cos(np.arange(840) / 7.0)),
+    ("one knot", np.array([500.0]), np.array([0.7])),
+    ("beyond 830", np.array([840.0, 900.0]), np.array([1.0, 2.0])),
+]
+
+
+@pytest.mark.parametrize("name,w,v", SPECTRA, ids=[s[0] for s in SPECTRA])
+def test_cells_are_exact(name, w, v):
+    """Both tables of cells, the specialized build's (fitted to the knots) and the generic
+    build's (1 nm, fixed), give the knots' interpolant to float32 rounding wherever no cell
+    holds two knots: the named conductors' tables, irregular knots, 5 and 0.5 nm grids."""
+    lam = probes(w)
+    want = knots_interpolant(w, v, lam)
+    outside = (lam < max(w[0], 360.0)) | (lam > min(w[-1], 830.0))
+    for cells in (sp.tabulated_cells(w, v), sp.generic_cells(sp.tabulated_slot(w, v))):
+        got = sp.eval_cells(cells, lam)
+        np.testing.assert_array_equal(got[outside], 0.0)
+        assert np.all(np.abs(got - want) <= 3e-7 * np.abs(want) + 1e-7 * v.max()), \
+            np.abs(got - want).max()
+    cells = sp.tabulated_cells(w, v)
+    if cells is not None:  # no wider than the knots' spacing inside 360..830 nm
+        inner = w[(w > 360.0) & (w < 830.0)]
+        if inner.size > 1:
+            assert cells.width <= np.diff(inner).min()
+
+
+def test_crowded_cells_interpolate_within_a_cell():
+    """Knots closer than the cells are wide (0.3 nm, off the cells' grid, for the generic
+    build's 1 nm cells; 0.05 nm, past the specialized build's 4096-cell cap): a smooth
+    curve's interpolant is then followed within the error of linear interpolation over one
+    cell, h^2/8 max|f''| plus that of the knots' own, and is exact at the cells' ends."""
+    def g(x: np.ndarray) -> np.ndarray:  # |g''| <= 0.5 / 400
+        return 1.0 + 0.5 * np.sin(x / 20.0)
+
+    lam = np.linspace(360.0, 830.0, 200001, dtype=np.float32)
+    for step, generic in ((0.3, True), (0.05, False)):
+        w = np.arange(300.17, 900.0, step)
+        v = g(w)
+        c = sp.generic_cells(sp.tabulated_slot(w, v)) if generic else sp.tabulated_cells(w, v)
+        assert c.count == (sp.GENERIC_CELLS if generic else sp.CELL_CAP)
+        err = np.abs(sp.eval_cells(c, lam) - knots_interpolant(w, v, lam)).max()
+        bound = (c.width ** 2 + step ** 2) / 8.0 * 0.5 / 400.0
+        assert err <= bound + 1e-6, (step, err, bound)
+        ends = np.float32(c.start + c.width * np.arange(c.count + 1))
+        np.testing.assert_allclose(sp.eval_cells(c, ends), knots_interpolant(w, v, ends),
+                                   rtol=1e-6)
 
 
 def test_spectrum_to_rgb_reflectance():
@@ -327,11 +406,20 @@ def test_mitsuba_film_conversion(mi):
 
 
 def test_mitsuba_tabulated_spectra(mi):
-    lam, values = [400.0, 480.0, 560.0, 700.0], [0.2, 0.9, 0.4, 0.7]
-    irregular = mi.load_dict({"type": "irregular", "wavelengths": ", ".join(map(str, lam)),
-                              "values": ", ".join(map(str, values))})
-    np.testing.assert_allclose(sp.resample(lam, values), mi_eval(mi, irregular, list(GRID)),
-                               atol=1e-6)
+    """Mitsuba's `irregular` spectrum is the knots' interpolant: at and beside its knots,
+    inside and outside them (gold's eta as `material="Au"` loads it, and four knots)."""
+    for lam, values in (read_spd(IOR[[p.name for p in IOR].index("Au.eta.spd")]),
+                        ([400.0, 480.0, 560.0, 700.0], [0.2, 0.9, 0.4, 0.7])):
+        lam, values = list(map(float, lam)), list(map(float, values))
+        irregular = mi.load_dict({"type": "irregular", "wavelengths": ", ".join(map(repr, lam)),
+                                  "values": ", ".join(map(repr, values))})
+        k = np.float32(lam)
+        beside = [np.nextafter(k, np.float32(0)), np.nextafter(k, np.float32(1e4))]
+        probe = np.concatenate([k, *beside, GRID, [395.0, 705.0]]).astype(np.float32)
+        probe = probe[(probe >= 360.0) & (probe <= 830.0)]
+        theirs = mi_eval(mi, irregular, [float(x) for x in probe])
+        np.testing.assert_allclose(sp.tabulated(lam, values, probe), theirs, rtol=2e-6,
+                                   atol=1e-7)
     for d65, ours in ((True, sp.spectrum_to_rgb_reflectance),
                       (False, sp.spectrum_to_rgb_emission)):
         theirs = mi.spectrum_list_to_srgb(lam, values, bounded=d65, d65=d65)

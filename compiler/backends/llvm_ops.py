@@ -117,7 +117,10 @@ class Lowering:
         return memo[value]
 
     def call(self, name: str, ret: L.Type, *args: L.Value) -> L.Value:
-        return self.b.call(self.m.intrinsic(name, ret, [a.type for a in args]), list(args))
+        # declared with opaque pointers: a table (a global `[n x float]`) passes for any
+        # other pointer, whatever its length
+        types = [PTR if isinstance(a.type, L.PointerType) else a.type for a in args]
+        return self.b.call(self.m.intrinsic(name, ret, types), list(args))
 
     def block(self, blk: ir.Block) -> list[L.Value] | None:
         """Lower the instructions of ``blk``; return the operands of its terminator."""

@@ -16,8 +16,17 @@ compiled on its own).  Colours become spectra as in Mitsuba 3:
 
 * ``Spectrum(r, g, b)`` with constant arguments is a reflectance: the Jakob & Hanika 2019
   sigmoid polynomial whose sRGB colour is (r, g, b), its coefficients found at compile time.
-  With a tabulated spectrum attached (``spectrum`` attribute, from a scene's ``<spectrum>``),
-  that table is interpolated instead.
+  With a tabulated spectrum attached (``spectrum`` attribute: the wavelengths and values of a
+  scene's ``<spectrum>``, spectrum file or named conductor), that spectrum is evaluated
+  instead, exactly (to float32 rounding) as Mitsuba's ``irregular``: the linear interpolant
+  of its knots, 0 outside them (and outside 360..830 nm).  A table of regular cells over its
+  range, no wider than its knots' spacing, holds per cell its knot and the lines either side
+  (``runtime/spectral.py``: ``tabulated_cells``); a wavelength's cell gives the knot, the
+  knot the line: three loads, no search.
+* ``spec.table(buf, offset)``, a tabulated spectrum the generic build stores in ``PRM``, is
+  evaluated the same way from the fixed 1 nm cells over 360..830 nm stored there
+  (``tabulated_slot``; see ``parameter_slots`` in specialize.py for when they are exact); a
+  select between two such spectra reads the table at the selected offset.
 * ``illuminant(r, g, b)`` is an emitted colour: the upsampled colour, scaled, times the D65
   illuminant (Mitsuba's ``d65`` plugin), so that white light stays white.
 * With arguments read from buffers, the runtime has stored coefficients there (and, for
@@ -283,6 +292,11 @@ class Lift(Pass):
                 term = b.op(Op.MUL, F32, b.const(w, F32), v)
                 acc = term if acc is None else b.op(Op.ADD, F32, acc, term)
             return acc if len(ops) == 3 else b.op(Op.MUL, F32, acc, ops[3])
+        if ins.op is Op.SPEC_TABLE:
+            if self.spectral is None:
+                raise self._fail(ins, f"a tabulated spectrum read from a buffer exists in "
+                                 f"spectral variants only (this is `{variant}`)")
+            return self.spectral.stored_table(b, ins, ops[0], ops[1])
         if ins.op is Op.SELECT and self.spectral is not None:
             return self.spectral.select(b, ins, ops)
         # Unpolarized variants: a spectrum is its own unpolarized part, and is read as
@@ -499,7 +513,7 @@ class _Mueller:
         op = ins.op
         if op is Op.BROADCAST and res_m:
             return self.from_scalar(b, self.splat(b, ops[0]))
-        if op in (Op.SPEC_RGB, Op.SPEC_MAKE, Op.SPEC_LAMBDA) and res_m:
+        if op in (Op.SPEC_RGB, Op.SPEC_TABLE, Op.SPEC_MAKE, Op.SPEC_LAMBDA) and res_m:
             ins.results[0].type = base
             u = lift._rewrite(ins, b, ops)
             ins.results[0].type = self.type
@@ -526,7 +540,11 @@ class _Mueller:
             mats = [v for v in ops if self.is_mueller(v)]
             if all(v in self.scalar for v in mats):  # all u * identity: act on the u's
                 args = [self.scalar.get(v, v) for v in ops]
-                return self.from_scalar(b, b.op(op, base, *args))
+                picked = (lift.spectral.select(b, ins, args)
+                          if op is Op.SELECT and lift.spectral is not None else None)
+                if picked is None:
+                    picked = b.op(op, base, *args)
+                return self.from_scalar(b, picked)
         if op in (Op.ADD, Op.SUB):
             x, y = self.get(b, ops[0]), self.get(b, ops[1])
             out: list[Value | None] = []
@@ -571,7 +589,8 @@ class _Mueller:
 
 class _Spectral:
     """The spectral variant's lowering of colours, for one kernel: its wavelengths and the
-    constant tables (CIE 1931, D65, tabulated spectra) it reads, placed at the kernel's top."""
+    constant tables (CIE 1931, D65, tabulated spectra' cells) it reads, placed at the
+    kernel's top."""
 
     def __init__(self, model: SpectrumModel, loc: Any) -> None:
         from ...runtime import spectral as data  # numpy only: the measured curves and fits
@@ -584,6 +603,8 @@ class _Spectral:
         # reflectances by their coefficients: a select between two picks coefficients and
         # evaluates one sigmoid (a scene's per-instance colours are such selects)
         self.coeffs: dict[Value, list[Value]] = {}
+        # tabulated spectra read from a buffer, by (buffer, offset): likewise picked by a select
+        self.stored: dict[Value, tuple[Value, Value]] = {}
 
     def lam(self, ins: Instr) -> Value:
         if self.wavelengths is None:
@@ -631,6 +652,61 @@ class _Spectral:
         lam = self.components(b, self.lam(ins))
         return b.op(Op.MAKE, VecType(4), *[self.sample_table(b, table, x) for x in lam])
 
+    def sample_cells(self, b: Builder, table: Value, base: Value | None, lam: Value,
+                     grid: tuple[float, float, int], lo: Value, hi: Value) -> Value:
+        """A tabulated spectrum's cells (``spectral.Cells``; ``grid``: their start, width and
+        count; at ``base`` in ``table``) at one wavelength: the cell's knot picks the line on
+        its side, whose value there and slope give the interpolant exactly; 0 outside
+        [lo, hi]."""
+        start, width, count = grid
+        t = b.op(Op.MUL, F32, b.op(Op.SUB, F32, lam, b.const(float(start), F32)),
+                 b.const(1.0 / width, F32))
+        j = b.op(Op.CAST, I32, t)  # truncates; saturates, NaN -> 0
+        j = b.op(Op.MIN, I32, b.op(Op.MAX, I32, j, b.const(0, I32)),
+                 b.const(count - 1, I32))
+        k = b.op(Op.MUL, I32, j, b.const(self.data.CELL_FLOATS, I32))
+        if base is not None:
+            k = b.op(Op.ADD, I32, k, base)
+        ref = b.op(Op.LOAD, F32, table, k)
+        right = b.op(Op.GE, BOOL, lam, ref)
+        at = b.op(Op.ADD, I32, k, b.op(Op.SELECT, I32, right, b.const(3, I32),
+                                       b.const(1, I32)))
+        v = b.op(Op.LOAD, F32, table, at)
+        slope = b.op(Op.LOAD, F32, table, b.op(Op.ADD, I32, at, b.const(1, I32)))
+        v = b.op(Op.ADD, F32, v, b.op(Op.MUL, F32, b.op(Op.SUB, F32, lam, ref), slope))
+        inside = b.op(Op.AND, BOOL, b.op(Op.GE, BOOL, lam, lo), b.op(Op.LE, BOOL, lam, hi))
+        return b.op(Op.SELECT, F32, inside, v, b.const(0.0, F32))
+
+    def tabulated(self, b: Builder, ins: Instr, wl: Any, values: Any) -> Value:
+        """A scene's tabulated spectrum (a constant of the specialized build) at the
+        wavelengths: exact, from cells fitted to its knots (``spectral.tabulated_cells``)."""
+        try:
+            cells = self.data.tabulated_cells(wl, values)
+        except ValueError as e:
+            raise CompileError([Diagnostic(ins.loc, str(e))]) from None
+        if cells is None:  # it lies outside 360..830 nm
+            return self.vec(b, 0.0)
+        table = self.table(cells.table.ravel())
+        lo, hi = b.const(cells.lo, F32), b.const(cells.hi, F32)
+        grid = (cells.start, cells.width, cells.count)
+        lam = self.components(b, self.lam(ins))
+        return b.op(Op.MAKE, VecType(4), *[self.sample_cells(b, table, None, x, grid, lo, hi)
+                                           for x in lam])
+
+    def stored_table(self, b: Builder, ins: Instr, buf: Value, offset: Value) -> Value:
+        """A tabulated spectrum the generic build stores in ``buf`` (its ``PRM``) at
+        ``offset``: lo, hi, then the 1 nm cells over [360, 830] (``spectral.tabulated_slot``)."""
+        d = self.data
+        grid = (d.LAMBDA_MIN, (d.LAMBDA_MAX - d.LAMBDA_MIN) / d.GENERIC_CELLS, d.GENERIC_CELLS)
+        lo = b.op(Op.LOAD, F32, buf, offset)
+        hi = b.op(Op.LOAD, F32, buf, b.op(Op.ADD, I32, offset, b.const(1, I32)))
+        base = b.op(Op.ADD, I32, offset, b.const(2, I32))
+        lam = self.components(b, self.lam(ins))
+        out = b.op(Op.MAKE, VecType(4), *[self.sample_cells(b, buf, base, x, grid, lo, hi)
+                                          for x in lam])
+        self.stored[out] = (buf, offset)
+        return out
+
     def sigmoid_poly(self, b: Builder, ins: Instr, c: list[Value]) -> Value:
         """Jakob & Hanika's model at the wavelengths: s(c0 l^2 + c1 l + c2), s(x) =
         1/2 + x / (2 sqrt(1 + x^2)); x is clamped so that x^2 stays finite."""
@@ -639,7 +715,12 @@ class _Spectral:
         return out
 
     def select(self, b: Builder, ins: Instr, ops: list[Value]) -> Value | None:
-        """``select(c, s(a), s(b))`` of two reflectances as ``s(select(c, a, b))``."""
+        """``select(c, s(a), s(b))`` of two reflectances as ``s(select(c, a, b))``, and of
+        two stored tables as the table at the selected offset."""
+        x, y = self.stored.get(ops[1]), self.stored.get(ops[2])
+        if x is not None and y is not None and x[0] is y[0]:
+            offset = x[1] if x[1] is y[1] else b.op(Op.SELECT, I32, ops[0], x[1], y[1])
+            return self.stored_table(b, ins, x[0], offset)
         a, c = self.coeffs.get(ops[1]), self.coeffs.get(ops[2])
         if a is None or c is None:
             return None
@@ -670,8 +751,7 @@ class _Spectral:
             rgb = np.asarray(consts[:3], np.float64)
             scale = consts[3] if len(consts) == 4 else 1.0
             if "spectrum" in ins.attrs:  # a tabulated spectrum the scene gave
-                wl, vals = ins.attrs["spectrum"]
-                out = self.sample_spectrum(b, ins, d.resample(wl, vals))
+                out = self.tabulated(b, ins, *ins.attrs["spectrum"])
             elif illuminant:
                 coeffs, s = d.illuminant_from_rgb(rgb)
                 out = b.op(Op.MUL, v4, self.sigmoid_poly(

@@ -31,7 +31,8 @@ the same dispatch over plugin types but reads every parameter the scene sets fro
 buffer ``PRM`` at run time (a :class:`Slot` per value, laid out by :func:`parameter_slots`);
 the placeholders, and every function that reaches one, get ``PRM`` as a last argument, the
 kernels included.  Its code depends on the scene's plugin types, instances and which
-parameters they set, never on the values, so scenes differing only in values share it.
+parameters they set, never on the values (a tabulated spectrum's knots included: see
+:func:`parameter_slots`), so scenes differing only in values share it.
 """
 
 from __future__ import annotations
@@ -98,11 +99,14 @@ class TextureRef:
 class Slot:
     """A parameter value read at run time from ``PRM[offset:offset + size]`` (the generic
     build).  Ints and bools are stored as floats (exact below 2**24) and converted back.  A
-    colour of a spectral build is 4 floats: its upsampling coefficients and a scale."""
+    colour of a spectral build is 4 floats: its upsampling coefficients and a scale; a
+    tabulated spectrum there (``table``) is ``spectral.GENERIC_SLOT`` floats, its cells on a
+    fixed 1 nm grid (``spectral.tabulated_slot``)."""
 
     offset: int
     size: int
     illuminant: bool = False
+    table: bool = False
 
 
 @dataclass(frozen=True)
@@ -148,8 +152,17 @@ def parameter_slots(scene: SceneSpec, variant: str = "rgb") -> tuple[SceneSpec, 
     """The generic build's scene: every parameter value the scene sets (textures aside)
     becomes a :class:`Slot` into the returned float32 buffer ``PRM``, which holds the values,
     instance after instance (colors and vectors as their components; empty if the scene sets
-    no parameter, and then the kernels take no ``PRM``).  In the spectral variant a colour
-    is stored as its upsampling coefficients and scale; a tabulated spectrum stays folded."""
+    no parameter, and then the kernels take no ``PRM``).  In the spectral variants a colour
+    is stored as its upsampling coefficients and scale, and a tabulated spectrum as the
+    range of its knots and the 470 cells of 1 nm over 360..830 nm of
+    ``spectral.tabulated_slot`` (2352 floats), read by ``spec.table``: a layout that does
+    not depend on the knots, so the code does not either.  The cells are exact (to float32
+    rounding, like the specialized build's cells fitted to the knots) unless a cell
+    [n, n + 1) nm holds two knots strictly inside: knots at least 1 nm apart (the named
+    conductors' tables: 5.4 nm at least) or every 0.5 nm on the half-nanometres are exact.
+    A crowded cell keeps one of its knots and drops the others, erring by what linear
+    interpolation without them does within that nanometre.  The other variants store the
+    RGB."""
     values: list[float] = []
 
     def slot(value: Any, what: str) -> Any:
@@ -159,7 +172,11 @@ def parameter_slots(scene: SceneSpec, variant: str = "rgb") -> tuple[SceneSpec, 
             if variant.removesuffix("_polarized") != "spectral":
                 value = value.rgb
             elif value.samples is not None:
-                return value
+                from ...runtime import spectral
+
+                out = Slot(len(values), spectral.GENERIC_SLOT, table=True)
+                values.extend(float(x) for x in spectral.tabulated_slot(*value.samples))
+                return out
             else:
                 from ...runtime import spectral
 
@@ -402,6 +419,11 @@ def _kind_test(fn: Function, kinds: tuple[int, ...]) -> Block:
 
 def _load(b: Builder, t: Type, slot: Slot, prm: Value, what: str) -> Value:
     """Read a parameter of type ``t`` from ``prm`` at ``slot`` (before lifting)."""
+    if slot.table:
+        if not isinstance(t, SpectrumType):
+            raise CompileError(f"{what}: a tabulated spectrum cannot set a parameter of "
+                               f"type `{t}`")
+        return b.op(Op.SPEC_TABLE, t, prm, b.const(slot.offset, I32))
     xs = [b.op(Op.LOAD, F32, prm, b.const(slot.offset + k, I32)) for k in range(slot.size)]
     if isinstance(t, ScalarType) and slot.size == 1:
         if t.name == "f32":
