@@ -165,6 +165,8 @@ class Lift(Pass):
             self._block(fn.body, mapping, top=True)
             replace_uses(fn.body, mapping)
             if self.spectral is not None:
+                at = self.spectral.set_at
+                fn.body.instrs[at:at] = self.spectral.prelude.block.instrs
                 fn.body.instrs[:0] = self.spectral.tables.block.instrs
 
     def _fold_traits(self, block: Block, mapping: dict[Value, Value]) -> None:
@@ -217,6 +219,8 @@ class Lift(Pass):
                     wl = self.mueller.entry(b, wl, 0, 0)
                     out.extend(b.block.instrs)
                 self._set_wavelengths(ins, wl, top)
+                if self.spectral is not None:
+                    self.spectral.set_at = len(out)  # where what depends on them alone goes
                 continue
             if self.mueller is not None:
                 replaced = self.mueller.rewrite(self, ins, b, ops)
@@ -599,6 +603,11 @@ class _Spectral:
         self.model = model
         self.wavelengths: Value | None = None
         self.tables = Builder(Block(), loc)
+        # what depends on the wavelengths alone (D65 at them), computed once where they are
+        # set rather than in every loop iteration that needs it
+        self.prelude = Builder(Block(), loc)
+        self.set_at = 0
+        self._d65: Value | None = None
         self._tables: dict[bytes, Value] = {}
         # reflectances by their coefficients: a select between two picks coefficients and
         # evaluates one sigmoid (a scene's per-instance colours are such selects)
@@ -739,8 +748,11 @@ class _Spectral:
         return b.op(Op.ADD, v4, b.op(Op.MUL, v4, half, b.op(Op.DIV, v4, x, r)), half)
 
     def d65(self, b: Builder, ins: Instr) -> Value:
-        return self.sample_spectrum(b, ins, np.asarray(self.data.d65_table())
-                                    * self.data.D65_NORMALIZATION)
+        """The D65 illuminant at the wavelengths (in the prelude, once per kernel)."""
+        if self._d65 is None:
+            self._d65 = self.sample_spectrum(self.prelude, ins, np.asarray(
+                self.data.d65_table()) * self.data.D65_NORMALIZATION)
+        return self._d65
 
     # -- the ops -------------------------------------------------------------------------
     def from_rgb(self, b: Builder, ins: Instr, ops: list[Value], illuminant: bool) -> Value:
