@@ -517,3 +517,35 @@ def test_kitchen_sink_equivalent(x, y, k, c):
     m2 = optimized(m)
     assert "if" not in body_ops(m2) and "loop" not in body_ops(m2)
     assert_equivalent(m, m2, "f", [x, y, k, c])
+
+
+def _loops_after_optimize(src: str) -> int:
+    from rdsl.compiler.driver import frontend, pipeline, run_passes
+
+    module = frontend(src)
+    run_passes(module, pipeline("rgb", 1), stop_after="optimize")
+    return sum(i.op is Op.LOOP for f in module.functions.values() for i in f.walk())
+
+
+def test_a_loop_whose_first_iteration_exits_is_peeled_and_others_are_kept():
+    """`peel` replaces a loop whose first iteration is its last by that iteration.  A cheap
+    test (`_Maybe`) first rules out loops whose exit cannot fold on the first iteration, so
+    the body is not simplified in vain; it must not rule out the loops that do peel: one that
+    never runs, one left by `break`, one left by a `break` under an `if`
+    on constants."""
+    once = {
+        "never": "var i = 5; while i < 1 { x = x * 2.0 + 1.0; i += 1; }",
+        "break": "while true { x = x * 2.0 + 1.0; break; }",
+        "if": "while true { x = x * 2.0; if 3 > 2 { break; } }",
+    }
+    for name, loop in once.items():
+        src = f"fn f(y: Float) -> Float {{ var x = y; {loop} return x; }}"
+        assert _loops_after_optimize(src) == 0, name
+    kept = {
+        "data": "while x < 100.0 { x = x * 2.0 + 1.0; }",
+        "count": "var i = 0; while i < 3 { x = x * 2.0 + 1.0; i += 1; }",
+        "break if data": "while true { x = x * 2.0; if x > 50.0 { break; } }",
+    }
+    for name, loop in kept.items():
+        src = f"fn f(y: Float) -> Float {{ var x = y; {loop} return x; }}"
+        assert _loops_after_optimize(src) == 1, name

@@ -28,6 +28,7 @@ import numpy as np
 
 from ..interp import InterpError, coerce, eval_pure, f32_bits
 from ..ir import (
+    BOOL,
     PURE_OPS,
     TERMINATORS,
     Block,
@@ -75,10 +76,96 @@ def _is_scalar(t: Any) -> bool:
     return isinstance(t, ScalarType) and t.lanes == 1
 
 
+_CMP_EVAL = {Op.EQ: lambda a, b: a == b, Op.NE: lambda a, b: a != b,
+             Op.LT: lambda a, b: a < b, Op.LE: lambda a, b: a <= b,
+             Op.GT: lambda a, b: a > b, Op.GE: lambda a, b: a >= b}
+
+
+class _Maybe:
+    """Whether a value of a loop's first iteration could simplify to a constant: a cheap
+    test before `peel` simplifies a copy of the body.  It answers "no" only when that is
+    sure: an input of the iteration that is not a constant (a non-constant initial value, a
+    load, a ray query...) reaches the value through operations that keep it non-constant.
+    Boolean connectives are followed exactly (false && x is false), an `if` whose condition
+    cannot be constant through all its branches; anything else is "maybe"."""
+
+    _OPAQUE = {Op.LOAD, Op.GATHER, Op.INTERSECT, Op.OCCLUDED, Op.LANE, Op.ANY}
+    DEPTH = 64
+
+    def __init__(self, s: _Simplifier, loop: Instr) -> None:
+        self.s = s
+        self.init = dict(zip(loop.regions[0].args, loop.operands))
+        self.inside: dict[Value, tuple[Instr, int]] = {}
+        stack = [loop.regions[0]]
+        while stack:
+            for ins in stack.pop().instrs:
+                for k, r in enumerate(ins.results):
+                    self.inside[r] = (ins, k)
+                stack.extend(ins.regions)
+        self.memo: dict[tuple[Value, Any], bool] = {}
+
+    def could_be(self, v: Value, want: Any, depth: int = 0) -> bool:
+        """Whether ``v`` could simplify to the constant ``want`` (None: to any constant)."""
+        if want is None and v.type == BOOL:
+            return self.could_be(v, False, depth) or self.could_be(v, True, depth)
+        key = (v, want)
+        if key not in self.memo:
+            self.memo[key] = True  # a cycle (none in SSA) or a deep chain: maybe
+            self.memo[key] = depth > self.DEPTH or self._could_be(v, want, depth + 1)
+        return self.memo[key]
+
+    def known(self, v: Value) -> Any:
+        """The constant ``v`` is in the first iteration, if it is one already."""
+        v = self.init.get(v, v)
+        if v in self.inside:
+            ins = self.inside[v][0]
+            return ins.attrs.get("value") if ins.op is Op.CONST else None
+        return self.s.consts.get(self.s.find(v))
+
+    def _could_be(self, v: Value, want: Any, depth: int) -> bool:
+        if v in self.init:
+            v = self.init[v]
+        if v not in self.inside:  # from outside the loop
+            c = self.s.consts.get(self.s.find(v))
+            return c is not None and (want is None or c == want)
+        ins, k = self.inside[v]
+        op = ins.op
+        if op is Op.CONST:
+            return want is None or "value" not in ins.attrs or ins.attrs["value"] == want
+        if op in self._OPAQUE or op is Op.LOOP:
+            return op is Op.LOOP
+        if op is Op.NOT:
+            return self.could_be(ins.operands[0], None if want is None else not want, depth)
+        if op in (Op.AND, Op.OR) and ins.result.type == BOOL and want is not None:
+            absorbing = op is Op.OR  # true || x, false && x
+            if want is absorbing:
+                return any(self.could_be(x, want, depth) for x in ins.operands)
+            return all(self.could_be(x, want, depth) for x in ins.operands)
+        if op is Op.SELECT:
+            return any(self.could_be(x, want, depth) for x in ins.operands[1:])
+        if op in _CMP_EVAL and all(self.known(x) is not None for x in ins.operands):
+            got = _CMP_EVAL[op](*(self.known(x) for x in ins.operands))
+            return want is None or bool(got) == want
+        if op is Op.IF:
+            ys = [r.instrs[-1].operands[k] for r in ins.regions]
+            cond = self.known(ins.operands[0])
+            if cond is not None and len(ys) == 2:
+                return self.could_be(ys[0 if cond else 1], want, depth)
+            if self.could_be(ins.operands[0], None, depth):
+                return any(self.could_be(y, want, depth) for y in ys)
+            return all(self.could_be(y, want, depth) for y in ys)
+        if op in PURE_OPS:
+            return all(self.could_be(x, None, depth) for x in ins.operands)
+        return True
+
+
 class _Simplifier:
     """One forward sweep over a function: folding, rewriting, CSE, region inlining."""
 
-    def __init__(self) -> None:
+    def __init__(self, unpeeled: dict[Instr, set[tuple]] | None = None) -> None:
+        # loops that did not peel, with what they were tried on (see `peel`): kept across
+        # the sweeps of one function, so an unchanged loop is not speculated on again
+        self.unpeeled = {} if unpeeled is None else unpeeled
         self.repl: dict[Value, Value] = {}
         self.consts: dict[Value, Any] = {}
         self.scopes: list[dict[Any, Value]] = []
@@ -123,8 +210,17 @@ class _Simplifier:
 
     def peel(self, loop: Instr) -> list[Instr] | None:
         """If the loop's continue flag is a constant false on the first iteration, return the
-        (already simplified) instructions of one copy of the body."""
+        (already simplified) instructions of one copy of the body.
+
+        Trying means simplifying a copy of the body, so a failure is remembered with what
+        the attempt saw: the body's size and the values (and constants) it reads from
+        outside.  While those stay the same, another try would fail the same way."""
         body = loop.regions[0]
+        if not _Maybe(self, loop).could_be(body.instrs[-1].operands[0], False):
+            return None
+        seen = self._peel_inputs(loop)
+        if seen in self.unpeeled.get(loop, ()):
+            return None
         clone = clone_block(body, dict(zip(body.args, loop.operands)))
         changed = self.changed
         self.speculating = True
@@ -135,11 +231,30 @@ class _Simplifier:
         y = clone.instrs[-1]
         if self.consts.get(self.find(y.operands[0])) is not False:
             self.changed = changed
+            self.unpeeled.setdefault(loop, set()).add(seen)
             return None
         for r, v in zip(loop.results, y.operands[1:]):
             self.repl[r] = v
         self.changed = True
         return clone.instrs[:-1]
+
+    def _peel_inputs(self, loop: Instr) -> tuple:
+        """The body's instruction count, and the loop's operands and the body's outer values
+        (after replacement) with their constants."""
+        defined: set[Value] = set()
+        outer: list[Value] = list(loop.operands)
+        count = 0
+        stack = [loop.regions[0]]
+        while stack:
+            blk = stack.pop()
+            defined.update(blk.args)
+            for ins in blk.instrs:
+                count += 1
+                outer.extend(ins.operands)
+                defined.update(ins.results)
+                stack.extend(ins.regions)
+        vals = [self.find(v) for v in outer if v not in defined]
+        return count, tuple((id(v), repr(self.consts.get(v))) for v in vals)
 
     def pure(self, ins: Instr) -> bool:
         """Simplify a pure single-result instruction; False if it was replaced."""
@@ -494,8 +609,9 @@ def _remove_dead_functions(m: Module) -> None:
 def optimize_function(fn: Function) -> None:
     """Simplify ``fn`` in place until nothing changes (or MAX_ITERATIONS sweeps)."""
     with np.errstate(all="ignore"):
+        unpeeled: dict[Instr, set[tuple]] = {}
         for _ in range(MAX_ITERATIONS):
-            s = _Simplifier()
+            s = _Simplifier(unpeeled)
             s.block(fn.body)
             changed = _dce(fn) or s.changed
             if not changed:
