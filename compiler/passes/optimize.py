@@ -89,7 +89,7 @@ class _Maybe:
     Boolean connectives are followed exactly (false && x is false), an `if` whose condition
     cannot be constant through all its branches; anything else is "maybe"."""
 
-    _OPAQUE = {Op.LOAD, Op.GATHER, Op.INTERSECT, Op.OCCLUDED, Op.LANE, Op.ANY}
+    _OPAQUE = frozenset({Op.LOAD, Op.GATHER, Op.INTERSECT, Op.OCCLUDED, Op.LANE, Op.ANY})
     DEPTH = 64
 
     def __init__(self, s: _Simplifier, loop: Instr) -> None:

@@ -26,9 +26,9 @@ texture at the same ``si`` first is the same thing.  A ``Float`` parameter set b
 lookup (its plugins' ``eval_1``, Mitsuba's).  A method in ``OPTIONAL`` (``disperses``) may
 be missing from a plugin: its instances then give the constant listed there.
 
-The generic build (``Specialize(scene, fold=False)``, ``rdsl render --no-specialize``) keeps
-the same dispatch over plugin types but reads every parameter the scene sets from a float
-buffer ``PRM`` at run time (a :class:`Slot` per value, laid out by :func:`parameter_slots`);
+The generic build (``Specialize(scene, fold=False, variant=...)``, ``rdsl render
+--no-specialize``) keeps the same dispatch over plugin types but reads every parameter the
+scene sets from a float buffer ``PRM`` at run time (a :class:`Slot` per value, laid out by :func:`parameter_slots`);
 the placeholders, and every function that reaches one, get ``PRM`` as a last argument, the
 kernels included.  Its code depends on the scene's plugin types, instances and which
 parameters they set, never on the values (a tabulated spectrum's knots included: see
@@ -224,10 +224,10 @@ class Specialize(Pass):
     name = "specialize"
 
     def __init__(self, scene: SceneSpec | None = None, report: list[str] | None = None,
-                 fold: bool = True) -> None:
+                 fold: bool = True, variant: str = "rgb") -> None:
         self.scene = scene or SceneSpec()
-        if not fold:
-            self.scene, _ = parameter_slots(self.scene)
+        if not fold:  # the parameter buffer holds colours as `variant` stores them
+            self.scene, _ = parameter_slots(self.scene, variant)
         self.report = report if report is not None else []
         self._prm: dict[str, Value] = {}  # placeholder -> its PRM argument, once it reads one
 

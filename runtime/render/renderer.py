@@ -385,7 +385,7 @@ class Scene:
 
     def _folding(self, scene: SceneSpec) -> list[str]:
         """What the build folds (specialized) or reads at run time (generic), for the report."""
-        _, values = parameter_slots(scene)
+        _, values = parameter_slots(scene, self.variant)
         n = sum(1 for i in [*scene.bsdfs, *scene.bsdf_leaves, *scene.textures,
                             *scene.emitters] if i.params)
         kinds = {v: k for k, v in EMITTER_KINDS.items()}
