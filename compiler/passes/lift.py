@@ -487,6 +487,11 @@ class _Mueller:
         inits = [mapping.get(v, v) for v in ins.operands]
         carried = {k: self.shape(v) for k, v in enumerate(inits)
                    if self.full(v.type) is not None}
+        if not carried:  # nothing to assume: one pass, in place
+            lift._block(original, mapping)
+            for r in ins.results:
+                r.type = lift.lift_type(r.type)
+            return [ins]
         while True:
             body = clone_block(original, {})
             head = Builder(Block(), ins.loc)

@@ -162,10 +162,7 @@ class _Maybe:
 class _Simplifier:
     """One forward sweep over a function: folding, rewriting, CSE, region inlining."""
 
-    def __init__(self, unpeeled: dict[Instr, set[tuple]] | None = None) -> None:
-        # loops that did not peel, with what they were tried on (see `peel`): kept across
-        # the sweeps of one function, so an unchanged loop is not speculated on again
-        self.unpeeled = {} if unpeeled is None else unpeeled
+    def __init__(self) -> None:
         self.repl: dict[Value, Value] = {}
         self.consts: dict[Value, Any] = {}
         self.scopes: list[dict[Any, Value]] = []
@@ -210,16 +207,10 @@ class _Simplifier:
 
     def peel(self, loop: Instr) -> list[Instr] | None:
         """If the loop's continue flag is a constant false on the first iteration, return the
-        (already simplified) instructions of one copy of the body.
-
-        Trying means simplifying a copy of the body, so a failure is remembered with what
-        the attempt saw: the body's size and the values (and constants) it reads from
-        outside.  While those stay the same, another try would fail the same way."""
+        (already simplified) instructions of one copy of the body.  Trying means simplifying
+        a copy of the body, so `_Maybe` first rules out loops whose flag cannot fold."""
         body = loop.regions[0]
         if not _Maybe(self, loop).could_be(body.instrs[-1].operands[0], False):
-            return None
-        seen = self._peel_inputs(loop)
-        if seen in self.unpeeled.get(loop, ()):
             return None
         clone = clone_block(body, dict(zip(body.args, loop.operands)))
         changed = self.changed
@@ -231,30 +222,11 @@ class _Simplifier:
         y = clone.instrs[-1]
         if self.consts.get(self.find(y.operands[0])) is not False:
             self.changed = changed
-            self.unpeeled.setdefault(loop, set()).add(seen)
             return None
         for r, v in zip(loop.results, y.operands[1:]):
             self.repl[r] = v
         self.changed = True
         return clone.instrs[:-1]
-
-    def _peel_inputs(self, loop: Instr) -> tuple:
-        """The body's instruction count, and the loop's operands and the body's outer values
-        (after replacement) with their constants."""
-        defined: set[Value] = set()
-        outer: list[Value] = list(loop.operands)
-        count = 0
-        stack = [loop.regions[0]]
-        while stack:
-            blk = stack.pop()
-            defined.update(blk.args)
-            for ins in blk.instrs:
-                count += 1
-                outer.extend(ins.operands)
-                defined.update(ins.results)
-                stack.extend(ins.regions)
-        vals = [self.find(v) for v in outer if v not in defined]
-        return count, tuple((id(v), repr(self.consts.get(v))) for v in vals)
 
     def pure(self, ins: Instr) -> bool:
         """Simplify a pure single-result instruction; False if it was replaced."""
@@ -609,9 +581,8 @@ def _remove_dead_functions(m: Module) -> None:
 def optimize_function(fn: Function) -> None:
     """Simplify ``fn`` in place until nothing changes (or MAX_ITERATIONS sweeps)."""
     with np.errstate(all="ignore"):
-        unpeeled: dict[Instr, set[tuple]] = {}
         for _ in range(MAX_ITERATIONS):
-            s = _Simplifier(unpeeled)
+            s = _Simplifier()
             s.block(fn.body)
             changed = _dce(fn) or s.changed
             if not changed:

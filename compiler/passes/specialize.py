@@ -28,8 +28,8 @@ be missing from a plugin: its instances then give the constant listed there.
 
 The generic build (``Specialize(scene, fold=False, variant=...)``, ``rdsl render
 --no-specialize``) keeps the same dispatch over plugin types but reads every parameter the
-scene sets from a float buffer ``PRM`` at run time (a :class:`Slot` per value, laid out by :func:`parameter_slots`);
-the placeholders, and every function that reaches one, get ``PRM`` as a last argument, the
+scene sets from a float buffer ``PRM`` at run time (a :class:`Slot` per value, laid out by
+:func:`parameter_slots`); the placeholders, and every function that reaches one, get ``PRM`` as a last argument, the
 kernels included.  Its code depends on the scene's plugin types, instances and which
 parameters they set, never on the values (a tabulated spectrum's knots included: see
 :func:`parameter_slots`), so scenes differing only in values share it.
@@ -163,6 +163,8 @@ def parameter_slots(scene: SceneSpec, variant: str = "rgb") -> tuple[SceneSpec, 
     A crowded cell keeps one of its knots and drops the others, erring by what linear
     interpolation without them does within that nanometre.  The other variants store the
     RGB."""
+    from ...runtime import spectral  # numpy only: the upsampling fit and spectrum cells
+
     values: list[float] = []
 
     def slot(value: Any, what: str) -> Any:
@@ -172,14 +174,10 @@ def parameter_slots(scene: SceneSpec, variant: str = "rgb") -> tuple[SceneSpec, 
             if variant.removesuffix("_polarized") != "spectral":
                 value = value.rgb
             elif value.samples is not None:
-                from ...runtime import spectral
-
                 out = Slot(len(values), spectral.GENERIC_SLOT, table=True)
                 values.extend(float(x) for x in spectral.tabulated_slot(*value.samples))
                 return out
             else:
-                from ...runtime import spectral
-
                 # the f32 values the specialized build's constants hold: the same fit
                 rgb = np.asarray(value.rgb, np.float32).astype(np.float64)
                 coeffs, scale = (spectral.illuminant_from_rgb(rgb) if value.illuminant
