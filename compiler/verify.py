@@ -86,39 +86,51 @@ class _FnVerifier:
         ots = [v.type for v in ins.operands]
         rts = [r.type for r in ins.results]
         if op is Op.IF:
-            self.expect_counts(ins, 1, None)
-            self.condition(ins, ins.operands[0], "if")
-            if len(ins.regions) != 2:
-                raise self.fail(f"'if' needs 2 regions, has {len(ins.regions)}", ins.loc)
-            for name, r in zip(("then", "else"), ins.regions):
-                if r.args:
-                    raise self.fail(f"the '{name}' region of an 'if' takes no arguments",
-                                    ins.loc)
-                self.block(r, Op.YIELD, ins.loc)
-                y = r.instrs[-1]
-                got = [v.type for v in y.operands]
-                if got != rts:
-                    raise self.fail(f"the '{name}' region yields {_tl(got)} but the 'if' "
-                                    f"produces {_tl(rts)}", y.loc)
-            return
-        if op is Op.LOOP:
-            if len(ins.regions) != 1:
-                raise self.fail(f"'loop' needs 1 region, has {len(ins.regions)}", ins.loc)
-            body = ins.regions[0]
-            argts = [a.type for a in body.args]
-            if not (ots == argts == rts):
-                raise self.fail(f"loop-carried types differ: operands {_tl(ots)}, body "
-                                f"arguments {_tl(argts)}, results {_tl(rts)}", ins.loc)
-            self.block(body, Op.YIELD, ins.loc)
-            y = body.instrs[-1]
-            got = [v.type for v in y.operands]
-            if not y.operands or got[1:] != rts:
-                raise self.fail(f"a loop body must yield {_tl([BOOL, *rts])} but yields "
-                                f"{_tl(got)}", y.loc)
-            self.condition(y, y.operands[0], "loop continue")
-            return
-        if ins.regions:
+            self.if_instr(ins, rts)
+        elif op is Op.LOOP:
+            self.loop_instr(ins, ots, rts)
+        elif ins.regions:
             raise self.fail(f"'{op.value}' cannot have regions", ins.loc)
+        else:
+            self.simple_instr(ins, ots, rts)
+
+    def if_instr(self, ins: Instr, rts: list[Type]) -> None:
+        """An ``if``: a bool condition, then/else regions yielding its result types."""
+        self.expect_counts(ins, 1, None)
+        self.condition(ins, ins.operands[0], "if")
+        if len(ins.regions) != 2:
+            raise self.fail(f"'if' needs 2 regions, has {len(ins.regions)}", ins.loc)
+        for name, r in zip(("then", "else"), ins.regions):
+            if r.args:
+                raise self.fail(f"the '{name}' region of an 'if' takes no arguments",
+                                ins.loc)
+            self.block(r, Op.YIELD, ins.loc)
+            y = r.instrs[-1]
+            got = [v.type for v in y.operands]
+            if got != rts:
+                raise self.fail(f"the '{name}' region yields {_tl(got)} but the 'if' "
+                                f"produces {_tl(rts)}", y.loc)
+
+    def loop_instr(self, ins: Instr, ots: list[Type], rts: list[Type]) -> None:
+        """A ``loop``: carried values typed alike as operands, body arguments and results."""
+        if len(ins.regions) != 1:
+            raise self.fail(f"'loop' needs 1 region, has {len(ins.regions)}", ins.loc)
+        body = ins.regions[0]
+        argts = [a.type for a in body.args]
+        if not (ots == argts == rts):
+            raise self.fail(f"loop-carried types differ: operands {_tl(ots)}, body "
+                            f"arguments {_tl(argts)}, results {_tl(rts)}", ins.loc)
+        self.block(body, Op.YIELD, ins.loc)
+        y = body.instrs[-1]
+        got = [v.type for v in y.operands]
+        if not y.operands or got[1:] != rts:
+            raise self.fail(f"a loop body must yield {_tl([BOOL, *rts])} but yields "
+                            f"{_tl(got)}", y.loc)
+        self.condition(y, y.operands[0], "loop continue")
+
+    def simple_instr(self, ins: Instr, ots: list[Type], rts: list[Type]) -> None:
+        """An instruction without regions: operand and result types by op category."""
+        op = ins.op
         if op in _BINARY or op in _UNARY:
             self.expect_counts(ins, 2 if op in _BINARY else 1, 1)
             if len(set(ots)) != 1:

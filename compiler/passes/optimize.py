@@ -30,7 +30,6 @@ from ..interp import InterpError, coerce, eval_pure, f32_bits
 from ..ir import (
     BOOL,
     PURE_OPS,
-    TERMINATORS,
     Block,
     Function,
     Instr,
@@ -41,9 +40,9 @@ from ..ir import (
     clone_block,
 )
 from . import Pass, register
+from .dce import eliminate_dead_code
 
 MAX_ITERATIONS = 50
-_EFFECT_OPS = {Op.STORE, Op.SCATTER, Op.CALL, Op.RETURN, Op.SPEC_SET}
 
 
 def _attr_key(v: Any) -> Any:
@@ -461,108 +460,6 @@ _ALGEBRA = {
     **{op: _cmp for op in _CMP},
 }
 
-# --------------------------------------------------------------------------------------
-# Dead code elimination (mark and sweep, with per-slot liveness of if/loop results)
-
-
-def _dce(fn: Function) -> bool:
-    parent: dict[Instr, Instr | None] = {}
-    producer: dict[Value, tuple[Instr, int]] = {}
-
-    def index(block: Block, owner: Instr | None) -> None:
-        if owner is not None and owner.op is Op.LOOP:
-            for k, a in enumerate(block.args):
-                producer[a] = (owner, k)
-        for ins in block.instrs:
-            parent[ins] = owner
-            for k, r in enumerate(ins.results):
-                producer[r] = (ins, k)
-            for r in ins.regions:
-                index(r, ins)
-
-    index(fn.body, None)
-    live: set[Instr] = set()
-    slots: set[tuple[Instr, int]] = set()
-    seen: set[Value] = set()
-    work: list[Value] = []
-
-    def push(v: Value) -> None:
-        if v not in seen:
-            seen.add(v)
-            work.append(v)
-
-    def mark(ins: Instr | None) -> None:
-        while ins is not None and ins not in live:
-            live.add(ins)
-            if ins.op is Op.IF:
-                push(ins.operands[0])
-            elif ins.op is Op.LOOP:
-                push(ins.regions[0].instrs[-1].operands[0])
-            elif ins.op is not Op.YIELD:
-                for v in ins.operands:
-                    push(v)
-            ins = parent[ins]
-
-    def mark_slot(ins: Instr, k: int) -> None:
-        if (ins, k) in slots:
-            return
-        slots.add((ins, k))
-        mark(ins)
-        if ins.op is Op.IF:
-            for r in ins.regions:
-                push(r.instrs[-1].operands[k])
-        else:
-            push(ins.operands[k])
-            push(ins.regions[0].instrs[-1].operands[k + 1])
-
-    for ins in fn.walk():
-        if ins.op in _EFFECT_OPS:
-            mark(ins)
-    while work:
-        v = work.pop()
-        if v in producer:
-            ins, k = producer[v]
-            mark(ins)
-            if ins.op in (Op.IF, Op.LOOP):
-                mark_slot(ins, k)
-
-    changed = False
-
-    def sweep(block: Block) -> None:
-        nonlocal changed
-        out = []
-        for ins in block.instrs:
-            if ins.op not in TERMINATORS and ins not in live:
-                changed = True
-                continue
-            if ins.op in (Op.IF, Op.LOOP):
-                keep = [k for k in range(len(ins.results)) if (ins, k) in slots]
-                if len(keep) < len(ins.results):
-                    changed = True
-                    _prune_slots(ins, keep)
-            for r in ins.regions:
-                sweep(r)
-            out.append(ins)
-        block.instrs = out
-
-    sweep(fn.body)
-    return changed
-
-
-def _prune_slots(ins: Instr, keep: list[int]) -> None:
-    ins.results = [ins.results[k] for k in keep]
-    if ins.op is Op.IF:
-        for r in ins.regions:
-            y = r.instrs[-1]
-            y.operands = [y.operands[k] for k in keep]
-    else:
-        body = ins.regions[0]
-        y = body.instrs[-1]
-        ins.operands = [ins.operands[k] for k in keep]
-        body.args = [body.args[k] for k in keep]
-        y.operands = [y.operands[0]] + [y.operands[k + 1] for k in keep]
-
-
 def _remove_dead_functions(m: Module) -> None:
     roots = [f for f in m.functions.values() if f.attrs.get("export")]
     if not roots:
@@ -584,7 +481,7 @@ def optimize_function(fn: Function) -> None:
         for _ in range(MAX_ITERATIONS):
             s = _Simplifier()
             s.block(fn.body)
-            changed = _dce(fn) or s.changed
+            changed = eliminate_dead_code(fn) or s.changed
             if not changed:
                 return
 
