@@ -246,6 +246,36 @@ class Kernel:
         ``wait=False`` returns a :class:`Pending` at once, while the thread pool runs the
         call: calls queued together share the pool, so one's last tasks overlap the next's
         first (the arrays passed in must not change until ``result()``)."""
+        values = self._bind(args, kwargs)
+        c_vals: list[Any] = [None] * len(self.args)
+        leaves, leaf_slots = self._convert_params(values, c_vals)
+        n = self._length(leaves, mask)
+        mask_arr = self._mask_array(mask, n) if mask is not None else None
+        if n is None:
+            n = 1
+        keep = []
+        for (_path, v), slot in zip(leaves, leaf_slots):
+            dt = self.args[slot]["dtype"]
+            if isinstance(v, np.ndarray):
+                a = v != 0 if dt == "bool" and v.dtype.kind != "b" else v
+                a = np.ascontiguousarray(a, dtype=DTYPES[dt])
+            else:
+                a = np.full(n, v, dtype=DTYPES[dt])
+            keep.append(a)
+            c_vals[slot] = a.ctypes.data
+        out_arrays = self._outputs(out, n, mask is not None, c_vals)
+        for i, a in enumerate(self.args):
+            if a["kind"] == "buffer":
+                c_vals[i] = c_vals[i].ctypes.data
+        mask_ptr = mask_arr.ctypes.data if mask_arr is not None else None
+
+        futures = self._run(n, c_vals, mask_ptr, threads)
+        pending = Pending(futures, (keep, mask_arr, c_vals),
+                          lambda: out if out is not None else self._results(out_arrays, n))
+        return pending if not wait else pending.result()
+
+    def _bind(self, args: tuple[Any, ...], kwargs: dict[str, Any]) -> dict[str, Any]:
+        """The call's arguments by parameter name (positional, then keywords)."""
         pos = self._positional
         if len(args) > len(pos):
             raise self._err(f"expected {len(pos)} positional arguments "
@@ -262,8 +292,12 @@ class Kernel:
         if missing:
             raise self._err(f"missing argument for parameter `{missing[0]}` (expected "
                             f"{', '.join(p['name'] for p in pos)})")
+        return values
 
-        c_vals: list[Any] = [None] * len(self.args)
+    def _convert_params(self, values: dict[str, Any], c_vals: list[Any]
+                        ) -> tuple[list[tuple[str, Any]], list[int]]:
+        """Fill ``c_vals`` with the buffers and uniform scalars; return the varying leaves
+        (path, array or scalar) and their argument slots, converted later once N is known."""
         leaves: list[tuple[str, Any]] = []
         leaf_slots: list[int] = []
         for p in self.params:
@@ -288,8 +322,10 @@ class Kernel:
             for leaf, item in zip(p["leaves"], flat_v):
                 leaves.append(item)
                 leaf_slots.append(self._arg_index[leaf])
+        return leaves, leaf_slots
 
-        # n from the first array; every array must agree
+    def _length(self, leaves: list[tuple[str, Any]], mask: Any) -> int | None:
+        """N, from the first array (the mask included); every array must agree."""
         n, n_from = None, None
         for path, v in leaves:
             if isinstance(v, np.ndarray):
@@ -304,52 +340,39 @@ class Kernel:
                 raise self._err(f"`mask` expects a bool array of shape (N,), got "
                                 f"{m.dtype} array of shape {m.shape}")
             if n is None:
-                n, n_from = len(m), "mask"
+                n = len(m)
             elif len(m) != n:
                 raise self._err(f"`mask` has {len(m)} elements, expected {n}")
-            mask_arr = np.ascontiguousarray(m != 0 if m.dtype.kind != "b" else m)
-            mask_arr = mask_arr.view(np.uint8)
-        if n is None:
-            n = 1
-        keep = []
-        for (path, v), slot in zip(leaves, leaf_slots):
-            dt = self.args[slot]["dtype"]
-            if isinstance(v, np.ndarray):
-                a = v != 0 if dt == "bool" and v.dtype.kind != "b" else v
-                a = np.ascontiguousarray(a, dtype=DTYPES[dt])
-            else:
-                a = np.full(n, v, dtype=DTYPES[dt])
-            keep.append(a)
-            c_vals[slot] = a.ctypes.data
+        return n
 
+    @staticmethod
+    def _mask_array(mask: Any, n: int) -> np.ndarray:
+        m = np.asarray(mask)
+        return np.ascontiguousarray(m != 0 if m.dtype.kind != "b" else m).view(np.uint8)
+
+    def _outputs(self, out: Any, n: int, masked: bool, c_vals: list[Any]) -> dict[str, Any]:
+        """Point the output arguments at ``out``'s arrays, or at fresh ones (returned by
+        name)."""
         outs = [(i, a) for i, a in enumerate(self.args) if a["kind"] == "output"]
-        out_arrays = {}
+        out_arrays: dict[str, Any] = {}
         if out is not None:
             for (i, _), arr in zip(outs, self._out_leaves(out, n)):
                 c_vals[i] = arr.ctypes.data
-        else:
-            # outputs of one dtype are the rows of one block, in result order: a vector
-            # result is then a view (no copy), and consecutive leaves are one contiguous array
-            alloc = np.zeros if mask is not None else np.empty
-            blocks = {}
-            for dt in dict.fromkeys(a["dtype"] for _, a in outs):
-                count = sum(1 for _, a in outs if a["dtype"] == dt)
-                blocks[dt] = [alloc((count, n), dtype=_C_DTYPES[dt]), 0]
-            for i, a in outs:
-                blk = blocks[a["dtype"]]
-                arr = blk[0][blk[1]]
-                blk[1] += 1
-                out_arrays[a["name"]] = arr
-                c_vals[i] = arr.ctypes.data
-        for i, a in enumerate(self.args):
-            if a["kind"] == "buffer":
-                c_vals[i] = c_vals[i].ctypes.data
-        mask_ptr = mask_arr.ctypes.data if mask is not None else None
-
-        futures = self._run(n, c_vals, mask_ptr, threads)
-        pending = Pending(futures, (keep, mask_arr if mask is not None else None, c_vals),
-                          lambda: out if out is not None else self._results(out_arrays, n))
-        return pending if not wait else pending.result()
+            return out_arrays
+        # outputs of one dtype are the rows of one block, in result order: a vector
+        # result is then a view (no copy), and consecutive leaves are one contiguous array
+        alloc = np.zeros if masked else np.empty
+        blocks = {}
+        for dt in dict.fromkeys(a["dtype"] for _, a in outs):
+            count = sum(1 for _, a in outs if a["dtype"] == dt)
+            blocks[dt] = [alloc((count, n), dtype=_C_DTYPES[dt]), 0]
+        for i, a in outs:
+            blk = blocks[a["dtype"]]
+            arr = blk[0][blk[1]]
+            blk[1] += 1
+            out_arrays[a["name"]] = arr
+            c_vals[i] = arr.ctypes.data
+        return out_arrays
 
     def _run(self, n: int, c_vals: list[Any], mask_ptr: Any, threads: int | None
              ) -> list[Future]:
