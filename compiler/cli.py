@@ -9,8 +9,11 @@ import argparse
 import sys
 from pathlib import Path
 
+from ..core.color import VARIANTS
 from .diagnostics import CompileError
 from .driver import InternalError
+
+_VARIANTS_HELP = ", ".join(VARIANTS) + " (default: rgb)"
 
 
 def _parser() -> argparse.ArgumentParser:
@@ -23,7 +26,7 @@ def _parser() -> argparse.ArgumentParser:
 
     i = sub.add_parser("ir", help="print the IR, after any pass")
     i.add_argument("file")
-    i.add_argument("--variant", default="rgb")
+    i.add_argument("--variant", default="rgb", help=_VARIANTS_HELP)
     i.add_argument("--target", default="host")
     i.add_argument("--print-after", default=None, metavar="PASS",
                    help="print after every run of PASS ('lower' for the frontend's IR, "
@@ -34,7 +37,7 @@ def _parser() -> argparse.ArgumentParser:
     k.add_argument("file")
     k.add_argument("--target", default="host",
                    help="scalar, sse4, avx2, avx512 or host (default)")
-    k.add_argument("--variant", default="rgb")
+    k.add_argument("--variant", default="rgb", help=_VARIANTS_HELP)
     k.add_argument("-o", "--output", default=None,
                    help="output stem: writes STEM.so, STEM.h and STEM.json "
                         "(default: the source's name in the current folder)")
@@ -49,7 +52,7 @@ def _parser() -> argparse.ArgumentParser:
                    "scene's sampler)")
     r.add_argument("--seed", type=int, default=None)
     r.add_argument("--target", default="host")
-    r.add_argument("--variant", default="rgb")
+    r.add_argument("--variant", default="rgb", help=_VARIANTS_HELP)
     r.add_argument("--threads", type=int, default=None, help="default: all cores")
     r.add_argument("-D", dest="defines", action="append", default=[], metavar="NAME=VALUE",
                    help="set a scene parameter declared with <default>")
@@ -98,16 +101,16 @@ def _check(args: argparse.Namespace) -> int:
 
 
 def _ir(args: argparse.Namespace) -> int:
+    from .build import Build
     from .driver import frontend, pipeline, run_passes
     from .passes import pass_names
     from .printer import print_module
-    from .targets import get_target
 
+    build = Build.of(args.target, args.variant)
     names = pass_names() + ["lower", "all"]
     if args.print_after is not None and args.print_after not in names:
         raise CompileError(f"unknown pass `{args.print_after}` (expected one of: "
                            f"{', '.join(names)})")
-    tgt = get_target(args.target)
     module = frontend(_require_file(args.file))
     if args.print_after in ("lower", "all"):
         print("// ----- after lower -----")
@@ -115,7 +118,7 @@ def _ir(args: argparse.Namespace) -> int:
     if args.print_after == "lower":
         return 0
     out = _LocFilter(sys.stdout) if args.no_locs else sys.stdout
-    run_passes(module, pipeline(args.variant, tgt.width), print_after=args.print_after,
+    run_passes(module, pipeline(build), print_after=args.print_after,
                out=out)
     if args.print_after is None:
         print(print_module(module, locs=not args.no_locs), end="")
@@ -137,12 +140,13 @@ class _LocFilter:
 def _compile(args: argparse.Namespace) -> int:
     from .backends.clib import build_library
     from .backends.llvm import emit_asm, emit_llvm, emit_object
+    from .build import Build
     from .driver import compile_kernels
-    from .targets import get_target
 
+    build = Build.of(args.target, args.variant)
+    tgt = build.target
     src = _require_file(args.file).resolve()
-    tgt = get_target(args.target)
-    module, _ = compile_kernels(src, target=tgt.name, variant=args.variant)
+    module, _ = compile_kernels(src, build)
     if args.emit in ("llvm", "asm", "obj"):
         data = {"llvm": lambda: emit_llvm(module, tgt), "asm": lambda: emit_asm(module, tgt),
                 "obj": lambda: emit_object(module, tgt)}[args.emit]()

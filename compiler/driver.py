@@ -12,6 +12,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import TextIO
 
+from .build import Build
 from .diagnostics import CompileError
 from .ir import Module
 from .passes import Pass
@@ -28,18 +29,18 @@ class InternalError(Exception):
     """A bug in rdsl (not the user's fault), tagged with the pass that hit it."""
 
 
-def pipeline(variant: str, width: int, scene: SceneSpec | None = None,
+def pipeline(build: Build, scene: SceneSpec | None = None,
              report: list[str] | None = None) -> list[Pass]:
-    """The passes from lowered IR to vectorized scalar IR, in order."""
+    """The passes from lowered IR to vectorized scalar IR for ``build``, in order."""
     return [
         *([Specialize(scene, report)] if scene is not None else []),  # the scene's instances
         Inline(),  # calls become bodies; recursion is a diagnostic
         Optimize(),  # fold and prune early, so later passes see less
-        Lift(variant),  # Spectrum becomes mono/rgb; `if const` traits become constants
+        Lift(build.model),  # Spectrum becomes mono/rgb; `if const` traits become constants
         Optimize(),  # fold the trait branches away
         Scalarize(),  # aggregates become scalars; kernel ABI recorded
         Optimize(),  # forward extracts, CSE the leaves
-        Vectorize(width),  # SPMD over lanes with masks
+        Vectorize(build.width),  # SPMD over lanes with masks
         Optimize(),  # CSE broadcasts and masks
     ]
 
@@ -89,17 +90,14 @@ def frontend(source_or_path: str | Path, filename: str | None = None) -> Module:
         raise CompileError("program too deeply nested") from e
 
 
-def compile_kernels(source_or_path: str | Path, target: str = "host", variant: str = "rgb",
-                    filename: str | None = None, scene: SceneSpec | None = None,
-                    report: list[str] | None = None) -> tuple[Module, list[Path]]:
-    """Compile to post-vectorize IR for ``target``.  Returns the module and the source
+def compile_kernels(source_or_path: str | Path, build: Build, filename: str | None = None,
+                    scene: SceneSpec | None = None, report: list[str] | None = None
+                    ) -> tuple[Module, list[Path]]:
+    """Compile to post-vectorize IR for ``build``.  Returns the module and the source
     files it was built from (for cache keys).  ``scene`` specializes the scene
     placeholders (see :mod:`rdsl.compiler.passes.specialize`); ``report`` collects what
     specialization did."""
-    from .targets import get_target
-
-    tgt = get_target(target)
     module = frontend(source_or_path, filename)
-    run_passes(module, pipeline(variant, tgt.width, scene, report))
-    module.attrs["target"] = tgt.name
+    run_passes(module, pipeline(build, scene, report))
+    module.attrs["target"] = build.target.name
     return module, source_files(source_or_path)

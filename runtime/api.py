@@ -11,11 +11,16 @@ import shutil
 import tempfile
 import time
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from ..compiler.diagnostics import CompileError
+from ..core.color import MODELS, ColorModel
 from .cache import STEM, cache_dir, cache_key, entry_complete
 from .kernel import Kernel
+
+if TYPE_CHECKING:
+    from ..compiler.build import Build
+    from ..compiler.targets import Target
 
 __all__ = ["Kernel", "Module", "jit", "load"]
 
@@ -64,12 +69,19 @@ class Module:
         self.path = path
         self.target: str = manifest["target"]
         self.width: int = int(manifest["width"])
-        self.variant = manifest.get("variant")
+        # the manifest names the variant; load() has checked that the name is known
+        variant = manifest.get("variant")
+        self.model: ColorModel | None = None if variant is None else MODELS[variant]
         self.from_cache = from_cache
         self.compile_seconds = compile_seconds
         self._lib = lib
         self.kernels: dict[str, Kernel] = {k["name"]: Kernel(self, k, lib)
                                            for k in manifest["kernels"]}
+
+    @property
+    def variant(self) -> str | None:
+        """The name of the variant the kernels were compiled for (None: no colours)."""
+        return None if self.model is None else self.model.name
 
     def __repr__(self) -> str:
         return (f"<rdsl.Module {self.path or ''} target={self.target} width={self.width} "
@@ -137,8 +149,11 @@ def load(path: str | os.PathLike, *, from_cache: bool = False,
         manifest = json.loads(man.read_text())
         target = manifest["target"]
         manifest["kernels"]
-    except (OSError, ValueError, KeyError, TypeError) as e:
+        variant = manifest.get("variant")
+    except (OSError, ValueError, KeyError, TypeError, AttributeError) as e:
         raise CompileError(f"{man}: not a valid rdsl manifest ({e})") from None
+    if variant is not None and variant not in MODELS:
+        raise CompileError(f"{man}: not a valid rdsl manifest (unknown variant `{variant}`)")
     try:
         runnable = host_supports(get_target(target))
     except CompileError:
@@ -165,24 +180,27 @@ def _source_text(source_or_path: str | os.PathLike) -> str:
         raise CompileError(f"cannot read `{p}`: {e.strerror or e}") from None
 
 
-def jit(source_or_path: str | os.PathLike, target: str = "host", variant: str = "rgb",
-        cache: bool = True, **options: Any) -> Module:
+def jit(source_or_path: str | os.PathLike, target: str | Target = "host",
+        variant: str | ColorModel = "rgb", cache: bool = True, *, build: Build | None = None,
+        **options: Any) -> Module:
     """Compile ``source_or_path`` (a ``.rdsl`` path or source text) for ``target`` and load it.
 
-    The library is cached under :func:`rdsl.runtime.cache.cache_dir`; a second call with the
-    same sources (imports included), target, variant and options loads it without compiling.
-    ``options`` are passed on to ``rdsl.compiler.driver.compile_kernels``."""
+    ``build``, when given, replaces ``target`` and ``variant``; a bad name of either is a
+    diagnostic before any source is read.  The library is cached under
+    :func:`rdsl.runtime.cache.cache_dir`; a second call with the same sources (imports
+    included), target, variant and options loads it without compiling.  ``options`` are
+    passed on to ``rdsl.compiler.driver.compile_kernels``."""
+    from ..compiler.build import Build
     from ..compiler.sources import source_files
-    from ..compiler.targets import get_target
 
     t0 = time.perf_counter()
-    tgt = get_target(target)
+    build = build or Build.of(target, variant)
     text = _source_text(source_or_path)
     files = [Path(f) for f in source_files(source_or_path)]
     # the file name only labels diagnostics, and a cached build had none: scenes copied to
     # another directory share their kernels
     keyed = {k: v for k, v in options.items() if k != "filename"}
-    key = cache_key(text, files, tgt.name, variant, tgt.width, keyed)
+    key = cache_key(text, files, build, keyed)
     root = cache_dir()
     entry = root / key
     if cache and entry_complete(entry):
@@ -191,12 +209,11 @@ def jit(source_or_path: str | os.PathLike, target: str = "host", variant: str = 
     from ..compiler import driver  # only now: a cache hit never imports the compiler
     from ..compiler.backends.clib import build_library
 
-    module, _ = driver.compile_kernels(source_or_path, target=tgt.name, variant=variant,
-                                       **options)
+    module, _ = driver.compile_kernels(source_or_path, build, **options)
     if not cache:
         tmp = Path(tempfile.mkdtemp(prefix="rdsl-jit-"))
         atexit.register(shutil.rmtree, tmp, True)
-        build_library(module, tgt, tmp, STEM)
+        build_library(module, build.target, tmp, STEM)
         return load(tmp / STEM, compile_seconds=time.perf_counter() - t0)
     try:
         root.mkdir(parents=True, exist_ok=True)
@@ -205,7 +222,7 @@ def jit(source_or_path: str | os.PathLike, target: str = "host", variant: str = 
         raise CompileError(f"cannot write to the kernel cache `{root}`: {e.strerror or e} "
                            "(set $RDSL_CACHE_DIR)") from None
     try:
-        build_library(module, tgt, tmp, STEM)
+        build_library(module, build.target, tmp, STEM)
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)
         raise

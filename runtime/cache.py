@@ -12,7 +12,10 @@ import os
 from collections.abc import Iterable
 from functools import lru_cache
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    from ..compiler.build import Build
 
 STEM = "kernels"  # file names inside a cache entry: kernels.so, kernels.h, kernels.json
 
@@ -28,10 +31,11 @@ def cache_dir() -> Path:
 @lru_cache(maxsize=1)
 def compiler_fingerprint() -> str:
     """A hash of the compiler's Python sources and grammar, so a changed compiler misses
-    (``runtime/spectral.py`` included: ``lift`` builds its tables with it)."""
+    (``core/`` and ``runtime/spectral.py`` included: ``lift`` builds its types and tables
+    with them)."""
     root = Path(__file__).resolve().parent.parent
     h = hashlib.sha256()
-    files = [p for sub in ("compiler", "dsl") for p in sorted((root / sub).rglob("*"))
+    files = [p for sub in ("compiler", "dsl", "core") for p in sorted((root / sub).rglob("*"))
              if p.suffix in (".py", ".lark") and p.is_file()]
     for p in [*files, root / "runtime" / "spectral.py"]:
         h.update(str(p.relative_to(root)).encode())
@@ -39,9 +43,9 @@ def compiler_fingerprint() -> str:
     return h.hexdigest()
 
 
-def cache_key(source_text: str, files: Iterable[os.PathLike | str], target: str,
-              variant: str | None, width: int, options: dict[str, Any]) -> str:
-    """The sha256 key of one compilation."""
+def cache_key(source_text: str, files: Iterable[os.PathLike | str], build: Build,
+              options: dict[str, Any]) -> str:
+    """The sha256 key of one compilation for ``build``."""
     from .. import __version__
 
     h = hashlib.sha256()
@@ -53,9 +57,9 @@ def cache_key(source_text: str, files: Iterable[os.PathLike | str], target: str,
 
     part("version", __version__)
     part("compiler", compiler_fingerprint())
-    part("target", target)
-    part("variant", str(variant))
-    part("width", str(width))
+    part("target", build.target.name)
+    part("variant", build.model.name)
+    part("width", str(build.width))
     part("options", json.dumps(options, sort_keys=True, default=repr))
     part("source", source_text)
     for f in files:

@@ -36,11 +36,11 @@ from typing import Any
 import numpy as np
 import rdsl
 from rdsl.compiler.passes.specialize import Instance, SceneSpec, SpectrumValue, parameter_slots
+from rdsl.core.color import MODELS, VARIANTS  # noqa: F401 (VARIANTS: for the tests)
 from rdsl.runtime import spectral as S
 from rdsl.runtime.render.bsdfs import BSDF_PLUGINS, bsdf_instance, split_leaves
 from rdsl.runtime.scene.loader import load_scene_description
 
-VARIANTS = ("mono", "rgb", "spectral", "mono_polarized", "spectral_polarized")
 STDLIB = Path(rdsl.__file__).resolve().parent / "stdlib"
 IOR_DIR = STDLIB / "data" / "ior"
 LUMINANCE = np.array([0.212671, 0.715160, 0.072169])  # CIE Y of the linear sRGB primaries
@@ -107,8 +107,8 @@ class Harness:
 
     def __init__(self, name: str, variant: str = "rgb", target: str = "host") -> None:
         self.name, self.variant, self.target = name, variant, target
-        self.polarized = variant.endswith("_polarized")
-        self.spectral = variant.removesuffix("_polarized") == "spectral"
+        self.model = MODELS[variant]
+        self.polarized, self.spectral = self.model.polarized, self.model.spectral
         self._mods: dict[str, Any] = {}
 
     # -- compilation ---------------------------------------------------------------------
@@ -128,7 +128,7 @@ class Harness:
     def module(self, params: dict[str, Any]) -> tuple[Any, np.ndarray]:
         """The compiled module for these parameters' layout, and their ``PRM`` buffer."""
         scene = SceneSpec(bsdfs=[Instance(self.name, self._params(params))])
-        spec, prm = parameter_slots(scene, self.variant)
+        spec, prm = parameter_slots(scene, self.model)
         key = repr(spec)
         if key not in self._mods:
             self._mods[key] = rdsl.jit(SOURCE.format(imports=f"import bsdf.{self.name};"),

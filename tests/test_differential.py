@@ -15,6 +15,7 @@ import pytest
 import rdsl
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
+from rdsl.compiler.build import Build
 from rdsl.compiler.driver import frontend, pipeline, run_passes
 from rdsl.compiler.interp import run_function
 from rdsl.compiler.targets import get_target, host_supports
@@ -64,7 +65,7 @@ def interp_modules():
     mods = {}
     for f in CORPUS.glob("*.rdsl"):
         m = frontend(f)
-        run_passes(m, pipeline("rgb", 1), stop_after="scalarize")
+        run_passes(m, pipeline(Build.of("scalar", "rgb")), stop_after="scalarize")
         mods[f.stem] = m
     return mods
 

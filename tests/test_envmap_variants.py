@@ -19,6 +19,7 @@ import pytest
 pytest.importorskip("rdsl.runtime.embree")
 
 import rdsl
+from rdsl.core.color import RGB, SPECTRAL
 from rdsl.runtime import spectral as S
 from rdsl.runtime.render.emitters import envmap_tables
 from rdsl.runtime.render.renderer import load_scene
@@ -75,7 +76,7 @@ def test_spectral_lookup_matches_mitsubas_model():
     rng = np.random.default_rng(2)
     im = rng.uniform(0.0, 1.0, (9, 16, 3)) ** 2 * 6.0
     im[4, 3] = 0.0  # black: scale 0
-    table, (w, h) = envmap_tables(im, "spectral")
+    table, (w, h) = envmap_tables(im, SPECTRAL)
     n = 4096
     u = ((np.arange(n) + 0.5) / n).astype(np.float32)
     d = rng.normal(size=(n, 3))
@@ -103,10 +104,10 @@ def test_spectral_lookup_matches_mitsubas_model():
 
 def test_texels_are_stored_as_each_variant_reads_them():
     im = np.array([[[0.2, 0.5, 0.9], [3.0, 0.0, 1.0]]] * 3)
-    rgb, _ = envmap_tables(im, "rgb")
+    rgb, _ = envmap_tables(im, RGB)
     np.testing.assert_allclose(rgb[:24].reshape(-1, 4)[:2], [[0.2, 0.5, 0.9, 1.0],
                                                              [3.0, 0.0, 1.0, 1.0]], rtol=1e-6)
-    spec, _ = envmap_tables(im, "spectral")
+    spec, _ = envmap_tables(im, SPECTRAL)
     texels = spec[:24].reshape(-1, 4)[:2].astype(np.float64)
     np.testing.assert_allclose(texels[:, 3], [1.8, 6.0], rtol=1e-6)  # 2 max(rgb), Mitsuba's
     np.testing.assert_allclose(texels[:, :3], S.rgb_to_coeffs(im[0, :2] / texels[:, 3:]),

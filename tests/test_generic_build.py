@@ -189,9 +189,9 @@ def test_spectral_tabulated_spectra_are_read_from_prm(tmp_path, monkeypatch):
     # four tabulated spectra in PRM, none among the code's constant tables (only the CIE
     # and D65 curves, 95 samples each), read at varying offsets
     assert generic[0].params.size >= 4 * spectral.GENERIC_SLOT
-    module, _ = compile_kernels(generic[0].kernel_src, target=generic[0].target,
-                                variant="spectral",
-                                scene=parameter_slots(generic[0].scene_spec, "spectral")[0])
+    build = generic[0].build
+    module, _ = compile_kernels(generic[0].kernel_src, build,
+                                scene=parameter_slots(generic[0].scene_spec, build.model)[0])
     instrs = [i for fn in module.functions.values() for i in fn.walk()]
     assert {len(i.attrs["values"]) for i in instrs if i.op is Op.TABLE} == {spectral.CIE_SAMPLES}
     assert any(i.op is Op.GATHER and i.operands[0].name == "PRM" for i in instrs)

@@ -12,6 +12,7 @@ import os
 from pathlib import Path
 
 import pytest
+from rdsl.compiler.build import Build
 from rdsl.compiler.driver import frontend, pipeline, run_passes
 from rdsl.compiler.ir import UNKNOWN_LOC
 from rdsl.compiler.irparse import parse_module
@@ -31,7 +32,7 @@ def _stages(path: Path) -> str:
     module = frontend(path)
     out = io.StringIO()
     out.write("// ----- after lower -----\n" + _user_functions(module))
-    for p in pipeline("rgb", 4):
+    for p in pipeline(Build.of("sse4", "rgb")):
         run_passes(module, [p], verify=True)
         out.write(f"// ----- after {p.name} -----\n" + _user_functions(module))
     return out.getvalue()
@@ -51,7 +52,7 @@ def test_golden(path: Path):
 @pytest.mark.parametrize("path", PROGRAMS, ids=lambda p: p.stem)
 def test_every_instruction_has_a_location(path: Path):
     module = frontend(path)
-    for p in [None] + pipeline("rgb", 4):
+    for p in [None] + pipeline(Build.of("sse4", "rgb")):
         if p is not None:
             run_passes(module, [p], verify=False)
         for fn in module.functions.values():
@@ -63,7 +64,7 @@ def test_every_instruction_has_a_location(path: Path):
 @pytest.mark.parametrize("path", PROGRAMS, ids=lambda p: p.stem)
 def test_textual_ir_round_trips_after_every_pass(path: Path):
     module = frontend(path)
-    for p in pipeline("rgb", 4):
+    for p in pipeline(Build.of("sse4", "rgb")):
         run_passes(module, [p], verify=False)
         text = print_module(module)
         assert print_module(parse_module(text)) == text, f"after {p.name}"

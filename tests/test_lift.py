@@ -6,6 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import rdsl
+from rdsl.compiler.build import Build
 from rdsl.compiler.diagnostics import CompileError
 from rdsl.compiler.driver import frontend, pipeline, run_passes
 from rdsl.compiler.ir import F32, SpectrumType, VecType
@@ -44,7 +45,7 @@ def test_mono_uses_luminance():
 @pytest.mark.parametrize("variant,concrete", [("mono", F32), ("rgb", VecType(3))])
 def test_no_spectrum_type_survives(variant, concrete):
     m = frontend(SRC)
-    run_passes(m, pipeline(variant, 1), stop_after="lift")
+    run_passes(m, pipeline(Build.of("scalar", variant)), stop_after="lift")
     fn = m.functions["tint"]
     assert fn.ret_types == [concrete]
     for ins in fn.walk():

@@ -520,10 +520,11 @@ def test_kitchen_sink_equivalent(x, y, k, c):
 
 
 def _loops_after_optimize(src: str) -> int:
+    from rdsl.compiler.build import Build
     from rdsl.compiler.driver import frontend, pipeline, run_passes
 
     module = frontend(src)
-    run_passes(module, pipeline("rgb", 1), stop_after="optimize")
+    run_passes(module, pipeline(Build.of("scalar", "rgb")), stop_after="optimize")
     return sum(i.op is Op.LOOP for f in module.functions.values() for i in f.walk())
 
 

@@ -33,6 +33,7 @@ from typing import Any
 import numpy as np
 import pytest
 import rdsl
+from rdsl.compiler.build import Build
 from rdsl.compiler.diagnostics import CompileError
 from rdsl.compiler.driver import frontend, pipeline, run_passes
 from rdsl.compiler.printer import print_module
@@ -216,7 +217,7 @@ def test_mueller_product_matches_numpy(kern):
 
 def _ir(path_or_src, variant: str, after: str = "lift") -> str:
     module = frontend(path_or_src)
-    passes = pipeline(variant, 1)
+    passes = pipeline(Build.of("scalar", variant))
     run_passes(module, passes, stop_after=after)
     return print_module(module)
 
@@ -255,7 +256,7 @@ def test_depolarizing_scene_compiles_to_the_mono_kernel(tmp_path):
     for variant in ("mono", "mono_polarized"):
         scene = rdsl.load_scene(cbox, variant=variant, res=24)
         images[variant] = scene.render(spp=4, seed=3)
-        module, _ = compile_kernels(scene.kernel_src, target="scalar", variant=variant,
+        module, _ = compile_kernels(scene.kernel_src, Build.of("scalar", variant),
                                     scene=scene.scene_spec)
         ops[variant] = Counter(i.op.value for i in module.functions["render_sample"].walk())
     assert sum(ops["mono"].values()) > 1000

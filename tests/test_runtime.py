@@ -250,11 +250,9 @@ def fake_driver(monkeypatch, tmp_path):
     def source_files(source_or_path):
         return [Path(source_or_path), lib] if Path(str(source_or_path)).exists() else [lib]
 
-    def compile_kernels(source_or_path, target="host", variant="rgb", **options):
-        from rdsl.compiler.targets import get_target
-
-        calls.append((str(source_or_path), target, variant, options))
-        return _shading_module(get_target(target).width), source_files(source_or_path)
+    def compile_kernels(source_or_path, build, **options):
+        calls.append((str(source_or_path), build.target.name, build.model.name, options))
+        return _shading_module(build.width), source_files(source_or_path)
 
     drv = types.ModuleType("rdsl.compiler.driver")
     drv.source_files, drv.compile_kernels = source_files, compile_kernels

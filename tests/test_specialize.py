@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 import rdsl
+from rdsl.compiler.build import Build
 from rdsl.compiler.driver import frontend, run_passes
 from rdsl.compiler.ir import Op
 from rdsl.compiler.passes.inline import Inline
@@ -88,7 +89,7 @@ def test_emitter_sampling_disappears_when_every_bsdf_is_delta(tmp_path):
     def shadow_rays(path: Path) -> int:
         s = rdsl.load_scene(path, variant="rgb", target="scalar")
         s.compile()
-        mod, _ = driver.compile_kernels(s.kernel_src, target="scalar", variant="rgb",
+        mod, _ = driver.compile_kernels(s.kernel_src, Build.of("scalar", "rgb"),
                                         scene=s.scene_spec)
         return sum(i.op is Op.OCCLUDED for i in mod.functions["render_sample"].walk())
 

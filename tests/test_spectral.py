@@ -15,9 +15,11 @@ import numpy as np
 import pytest
 
 import rdsl
+from rdsl.compiler.build import Build
 from rdsl.compiler.diagnostics import CompileError
 from rdsl.compiler.driver import frontend, pipeline, run_passes
 from rdsl.compiler.ir import Op, SpectrumType, VecType
+from rdsl.core.color import SPECTRAL
 from rdsl.runtime import spectral as S
 
 N = 4096
@@ -144,7 +146,7 @@ def test_tabulated_spectrum_is_exact(name, target, specialize):
         (0.3, 0.3, 0.3), (tuple(wl), tuple(vals)), illuminant=True)})])
     extra = []
     if not specialize:
-        scene, prm = parameter_slots(scene, "spectral")
+        scene, prm = parameter_slots(scene, SPECTRAL)
         extra = [prm]
     mod = rdsl.jit(TABULATED_SRC, target=target, variant="spectral", scene=scene)
     lam = _probe_wavelengths(wl).reshape(-1, 4)
@@ -160,7 +162,7 @@ def test_tabulated_spectrum_is_exact(name, target, specialize):
 
 def test_lift_gives_concrete_types():
     m = frontend(KERNEL)
-    run_passes(m, pipeline("spectral", 1), stop_after="lift")
+    run_passes(m, pipeline(Build.of("scalar", "spectral")), stop_after="lift")
     for fn in m.functions.values():
         for ins in fn.walk():
             assert not ins.op.value.startswith("spec."), ins.op

@@ -1,4 +1,4 @@
-"""``lift(variant)``: give the abstract ``Spectrum`` a concrete representation.
+"""``lift(model)``: give the abstract ``Spectrum`` a concrete representation.
 
 Expects: an inlined module (no calls) whose values may have type ``spectrum`` or aggregates
 containing it, ``spec.*`` ops, and ``const trait "<name>"`` booleans from ``if const``.
@@ -6,7 +6,7 @@ containing it, ``spec.*`` ops, and ``const trait "<name>"`` booleans from ``if c
 Guarantees: no value has a ``spectrum`` type; no ``spec.*`` op and no trait constant
 remains, and the branches of ``if const`` that the variant does not take are gone (so code
 valid in one variant only may sit inside them).  What each variant's spectrum becomes is
-described by a :class:`SpectrumModel`.
+described by its :class:`~rdsl.core.color.ColorModel`.
 
 Spectral variants (``n = 4``) carry the four wavelengths of a sample as an implicit value:
 ``set_wavelengths(wl)`` in the kernel's top-level block defines it, and every colour after it
@@ -38,11 +38,11 @@ compiled on its own).  Colours become spectra as in Mitsuba 3:
 
 from __future__ import annotations
 
-from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
+from ...core.color import RGB, ColorModel
 from ..diagnostics import CompileError, Diagnostic
 from ..ir import (
     ARITH_OPS,
@@ -69,30 +69,21 @@ from ..ir import (
 )
 from . import Pass, register
 
-VARIANTS = ("mono", "rgb", "spectral", "mono_polarized", "spectral_polarized")
-
 # CIE Y weights of linear sRGB primaries: what a mono variant sees of an RGB value.
 _LUMINANCE = (0.212671, 0.715160, 0.072169)
 
 
-@dataclass(frozen=True)
-class SpectrumModel:
-    """How a variant represents ``Spectrum``: ``n`` f32 samples per unpolarized value (1 = a
-    plain ``f32``); when ``polarized``, a 4x4 Mueller matrix of such values (the struct
+def unpolarized_type(model: ColorModel, lanes: int = 1) -> Type:
+    """The lifted ``Unpolarized``: ``f32`` for one sample, else a vector of ``model.n``."""
+    return F32.with_lanes(lanes) if model.n == 1 else VecType(model.n, lanes=lanes)
+
+
+def concrete_type(model: ColorModel, lanes: int = 1) -> Type:
+    """The lifted ``Spectrum``: the unpolarized type, or a Mueller matrix of it (the struct
     ``%Mueller``, row-major fields ``m00 .. m33``)."""
-
-    variant: str
-    n: int
-    traits: frozenset[str]
-    polarized: bool = False
-
-    def unpolarized(self, lanes: int = 1) -> Type:
-        return F32.with_lanes(lanes) if self.n == 1 else VecType(self.n, lanes=lanes)
-
-    def concrete(self, lanes: int = 1) -> Type:
-        if self.polarized:
-            return mueller_type(self.unpolarized(), lanes)
-        return self.unpolarized(lanes)
+    if model.polarized:
+        return mueller_type(unpolarized_type(model), lanes)
+    return unpolarized_type(model, lanes)
 
 
 MUELLER_FIELDS = tuple(f"m{i}{j}" for i in range(4) for j in range(4))
@@ -103,37 +94,19 @@ def mueller_type(entry: Type, lanes: int = 1) -> StructType:
     return StructType("Mueller", tuple((f, entry) for f in MUELLER_FIELDS), lanes=lanes)
 
 
-MODELS = {
-    "mono": SpectrumModel("mono", 1, frozenset({"mono"})),
-    "rgb": SpectrumModel("rgb", 3, frozenset({"rgb"})),
-    "spectral": SpectrumModel("spectral", 4, frozenset({"spectral"})),
-    "mono_polarized": SpectrumModel("mono_polarized", 1, frozenset({"mono", "polarized"}),
-                                    polarized=True),
-    "spectral_polarized": SpectrumModel("spectral_polarized", 4,
-                                        frozenset({"spectral", "polarized"}), polarized=True),
-}
-
-
-def model_for(variant: str) -> SpectrumModel:
-    """The spectrum model of ``variant``, or a diagnostic naming the accepted variants."""
-    if variant in MODELS:
-        return MODELS[variant]
-    raise CompileError(f"unknown variant `{variant}` (expected one of: {', '.join(VARIANTS)})")
-
-
 @register
 class Lift(Pass):
     name = "lift"
 
-    def __init__(self, variant: str = "rgb") -> None:
-        self.model = model_for(variant)
+    def __init__(self, model: ColorModel = RGB) -> None:
+        self.model = model
 
     # -- types -------------------------------------------------------------------------
     def lift_type(self, t: Type) -> Type:
         if isinstance(t, UnpolarizedType):
-            return self.model.unpolarized(t.lanes)
+            return unpolarized_type(self.model, t.lanes)
         if isinstance(t, SpectrumType):
-            return self.model.concrete(t.lanes)
+            return concrete_type(self.model, t.lanes)
         if isinstance(t, StructType):
             fields = tuple((n, self.lift_type(ft)) for n, ft in t.fields)
             return StructType(t.name, fields, lanes=t.lanes)
@@ -143,10 +116,10 @@ class Lift(Pass):
 
     # -- module ------------------------------------------------------------------------
     def run(self, module: Module) -> None:
-        module.attrs["variant"] = self.model.variant
+        module.attrs["variant"] = self.model.name
         module.structs = {k: self.lift_type(v) for k, v in module.structs.items()}
         if self.model.polarized:
-            module.structs["Mueller"] = self.model.concrete()
+            module.structs["Mueller"] = concrete_type(self.model)
         for fn in module.functions.values():
             for p in fn.params:
                 p.value.type = self.lift_type(p.value.type)
@@ -257,7 +230,7 @@ class Lift(Pass):
         """Return the replacement of ``ins``'s result, or None to keep ``ins``.  Unpolarized
         values only: ``ins.type`` is the concrete spectrum (or what a spectrum op gives)."""
         n = self.model.n
-        variant = self.model.variant
+        variant = self.model.name
         if ins.op is Op.BROADCAST and n == 1 and isinstance(ops[0].type, ScalarType) \
                 and ins.type == ops[0].type:
             return ops[0]
@@ -344,10 +317,10 @@ class _Mueller:
     zeros, and operations that only make sense elementwise (division, sqrt, min...) are
     allowed on matrices known to be u * identity, where they act on u."""
 
-    def __init__(self, model: SpectrumModel) -> None:
+    def __init__(self, model: ColorModel) -> None:
         self.model = model
-        self.base = model.unpolarized()
-        self.type = model.concrete()
+        self.base = unpolarized_type(model)
+        self.type = concrete_type(model)
         self.entries: dict[Value, list[Value | None]] = {}
         self.scalar: dict[Value, Value] = {}
         self.parts: dict[Value, Any] = {}  # shapes of structs and tuples holding matrices
@@ -590,7 +563,7 @@ class _Mueller:
             what = _ELEMENTWISE_ONLY[op]
             verb = what if not what.startswith("`") else f"apply {what} to"
             raise lift._fail(ins, f"cannot {verb} a polarized Spectrum (a Mueller matrix) in "
-                             f"the `{self.model.variant}` variant: that is defined on "
+                             f"the `{self.model.name}` variant: that is defined on "
                              "unpolarized values only; use `unpolarized(s)` or put this "
                              "code inside `if const polarized { ... } else { ... }`")
         return None
@@ -601,7 +574,7 @@ class _Spectral:
     constant tables (CIE 1931, D65, tabulated spectra' cells) it reads, placed at the
     kernel's top."""
 
-    def __init__(self, model: SpectrumModel, loc: Any) -> None:
+    def __init__(self, model: ColorModel, loc: Any) -> None:
         from ...runtime import spectral as data  # numpy only: the measured curves and fits
 
         self.data = data

@@ -26,7 +26,7 @@ texture at the same ``si`` first is the same thing.  A ``Float`` parameter set b
 lookup (its plugins' ``eval_1``, Mitsuba's).  A method in ``OPTIONAL`` (``disperses``) may
 be missing from a plugin: its instances then give the constant listed there.
 
-The generic build (``Specialize(scene, fold=False, variant=...)``, ``rdsl render
+The generic build (``Specialize(scene, fold=False, model=...)``, ``rdsl render
 --no-specialize``) keeps the same dispatch over plugin types but reads every parameter the
 scene sets from a float buffer ``PRM`` at run time (a :class:`Slot` per value, laid out by
 :func:`parameter_slots`); the placeholders, and every function that reaches one, get ``PRM`` as a last argument, the
@@ -42,6 +42,7 @@ from typing import Any
 
 import numpy as np
 
+from ...core.color import RGB, ColorModel
 from ..diagnostics import CompileError
 from ..ir import (
     BOOL,
@@ -148,7 +149,8 @@ class SceneSpec:
     shape_kinds: tuple[int, ...] | None = None
 
 
-def parameter_slots(scene: SceneSpec, variant: str = "rgb") -> tuple[SceneSpec, np.ndarray]:
+def parameter_slots(scene: SceneSpec, model: ColorModel = RGB
+                    ) -> tuple[SceneSpec, np.ndarray]:
     """The generic build's scene: every parameter value the scene sets (textures aside)
     becomes a :class:`Slot` into the returned float32 buffer ``PRM``, which holds the values,
     instance after instance (colors and vectors as their components; empty if the scene sets
@@ -171,7 +173,7 @@ def parameter_slots(scene: SceneSpec, variant: str = "rgb") -> tuple[SceneSpec, 
         if isinstance(value, (TextureRef, Slot)):
             return value
         if isinstance(value, SpectrumValue):
-            if variant.removesuffix("_polarized") != "spectral":
+            if not model.spectral:
                 value = value.rgb
             elif value.samples is not None:
                 out = Slot(len(values), spectral.GENERIC_SLOT, table=True)
@@ -222,10 +224,10 @@ class Specialize(Pass):
     name = "specialize"
 
     def __init__(self, scene: SceneSpec | None = None, report: list[str] | None = None,
-                 fold: bool = True, variant: str = "rgb") -> None:
+                 fold: bool = True, model: ColorModel = RGB) -> None:
         self.scene = scene or SceneSpec()
-        if not fold:  # the parameter buffer holds colours as `variant` stores them
-            self.scene, _ = parameter_slots(self.scene, variant)
+        if not fold:  # the parameter buffer holds colours as `model` stores them
+            self.scene, _ = parameter_slots(self.scene, model)
         self.report = report if report is not None else []
         self._prm: dict[str, Value] = {}  # placeholder -> its PRM argument, once it reads one
 

@@ -34,6 +34,7 @@ from typing import Any
 
 from ...compiler.diagnostics import CompileError
 from ...compiler.passes.specialize import Instance
+from ...core.color import ColorModel
 from ..scene.schema import spec_for
 from .colors import spectrum_value
 
@@ -69,29 +70,29 @@ def _scene_bsdfs(desc: Any) -> Iterator[Any]:
             yield plugin
 
 
-def polarization_warnings(desc: Any, variant: str) -> list[str]:
+def polarization_warnings(desc: Any, model: ColorModel) -> list[str]:
     """Warnings for plugins whose meaning is polarization, in an unpolarized variant."""
-    if variant.endswith("_polarized"):
+    if model.polarized:
         return []
     out = []
     for plugin in _scene_bsdfs(desc):
         if plugin.type in UNPOLARIZED_BEHAVIOUR:
             out.append(f"{plugin.loc or desc.path}: warning: {_where(plugin)} has no effect on "
-                       f"polarization in the unpolarized `{variant}` variant; it acts as "
+                       f"polarization in the unpolarized `{model.name}` variant; it acts as "
                        f"{UNPOLARIZED_BEHAVIOUR[plugin.type]} (as in Mitsuba 3). Render with "
                        "`mono_polarized` or `spectral_polarized` to polarize light.")
     return out
 
 
-def dispersion_warnings(desc: Any, variant: str) -> list[str]:
+def dispersion_warnings(desc: Any, model: ColorModel) -> list[str]:
     """Warnings for dispersive dielectrics (Cauchy B terms) in a variant without wavelengths."""
-    if variant.removesuffix("_polarized") == "spectral":
+    if model.spectral:
         return []
     out = []
     for plugin in _scene_bsdfs(desc):
         if plugin.params.get("int_cauchy_b") or plugin.params.get("ext_cauchy_b"):
             out.append(f"{plugin.loc or desc.path}: warning: {_where(plugin)} is dispersive "
-                       f"(Cauchy B term), which only spectral variants render; the `{variant}` "
+                       f"(Cauchy B term), which only spectral variants render; the `{model.name}` "
                        "variant uses its IOR at 589.3 nm (the sodium D line) for every colour.")
     return out
 

@@ -14,9 +14,11 @@ from .progress import summary_line
 
 
 def render_command(args: Any) -> int:
+    from ...compiler.build import Build
     from ..scene.xml import parse_defines
     from .renderer import load_scene
 
+    build = Build.of(args.target, args.variant)  # a bad name fails before the scene loads
     scene_path = Path(args.scene)
     if not scene_path.is_file():
         raise CompileError(f"{scene_path}: error: no such scene file")
@@ -30,8 +32,7 @@ def render_command(args: Any) -> int:
     defines = parse_defines(args.defines)
 
     t0 = time.perf_counter()
-    scene = load_scene(scene_path, variant=args.variant, target=args.target,
-                       specialize=getattr(args, "specialize", True),
+    scene = load_scene(scene_path, build=build, specialize=getattr(args, "specialize", True),
                        triangulate=getattr(args, "triangulate", False), **defines)
     t_load = time.perf_counter() - t0
     if not scene.buffers.nlight:
@@ -48,7 +49,7 @@ def render_command(args: Any) -> int:
               f"({100 * (spec - generic) / generic:+.0f}%)")
         k = mod.manifest["kernels"]
         print(f"kernels: {', '.join(x['name'] for x in k)} for `{mod.target}` "
-              f"(width {mod.width}, variant {mod.variant})")
+              f"(width {mod.width}, variant {scene.build.model.name})")
     spp = args.spp or scene.spp
     t1 = time.perf_counter()
     img = scene.render(spp=spp, seed=args.seed, threads=args.threads,

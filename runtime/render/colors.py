@@ -16,6 +16,7 @@ import numpy as np
 
 from ...compiler.diagnostics import CompileError
 from ...compiler.passes.specialize import SpectrumValue
+from ...core.color import ColorModel
 
 
 def spectrum_value(value: Any, what: str, illuminant: bool = False, loc: Any = None
@@ -39,11 +40,11 @@ def spectrum_value(value: Any, what: str, illuminant: bool = False, loc: Any = N
     return SpectrumValue(tuple(float(x) for x in rgb), samples, illuminant)
 
 
-def emission_row(rgb: np.ndarray, variant: str) -> tuple[np.ndarray, float]:
+def emission_row(rgb: np.ndarray, model: ColorModel) -> tuple[np.ndarray, float]:
     """An emitted colour as an emitter table stores it: 3 floats and a scale (the rdsl
     ``illuminant(c0, c1, c2, scale)``)."""
     rgb = np.asarray(rgb, np.float64)
-    if variant.removesuffix("_polarized") != "spectral":
+    if not model.spectral:
         return rgb, 1.0
     from ..spectral import illuminant_from_rgb
 
@@ -51,9 +52,9 @@ def emission_row(rgb: np.ndarray, variant: str) -> tuple[np.ndarray, float]:
     return np.asarray(coeffs, np.float64), float(scale)
 
 
-def encode_texels(texels: np.ndarray, variant: str) -> np.ndarray:
-    """Reflectance texels (..., 3) as the variant stores them."""
-    if variant.removesuffix("_polarized") != "spectral":
+def encode_texels(texels: np.ndarray, model: ColorModel) -> np.ndarray:
+    """Reflectance texels (..., 3) as ``model`` stores them."""
+    if not model.spectral:
         return texels
     from ..spectral import rgb_to_coeffs
 
@@ -62,13 +63,13 @@ def encode_texels(texels: np.ndarray, variant: str) -> np.ndarray:
                       np.float32).reshape(shape)
 
 
-def emission_texels(rgb: np.ndarray, variant: str) -> np.ndarray:
+def emission_texels(rgb: np.ndarray, model: ColorModel) -> np.ndarray:
     """Emitted colours (n, 3) as an environment map's texels store them: 4 floats each,
     read by ``illuminant(c0, c1, c2)`` and a scale (linear sRGB and 1 in mono and rgb;
     coefficients of ``rgb / scale`` and ``scale = 2 max(rgb)`` in spectral, as Mitsuba's
     envmap)."""
     rgb = np.asarray(rgb, np.float64).reshape(-1, 3)
-    if variant.removesuffix("_polarized") != "spectral":
+    if not model.spectral:
         return np.concatenate([rgb, np.ones((len(rgb), 1))], axis=1)
     from ..spectral import illuminant_from_rgb
 

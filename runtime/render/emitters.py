@@ -15,6 +15,7 @@ from typing import Any
 import numpy as np
 
 from ...compiler.diagnostics import CompileError
+from ...core.color import RGB, ColorModel
 from .colors import emission_row, emission_texels
 
 KINDS = {"area": 0, "point": 1, "spot": 2, "directional": 3, "constant": 4, "envmap": 5}
@@ -61,7 +62,7 @@ def _linear_part(m: np.ndarray, what: str, loc: Any, rigid: bool) -> np.ndarray:
 def emitter_tables(desc: Any, lights: list[tuple[int, int, float]],
                    area_emitters: int,
                    analytic: dict[int, tuple[int, int, float]] | None = None,
-                   variant: str = "rgb") -> EmitterTables:
+                   model: ColorModel = RGB) -> EmitterTables:
     """Tables for the scene's emitters.  ``lights`` holds (triangle, shape, area) for every
     triangle of the area-lit shapes, in shape order; ``area_emitters`` counts those shapes.
     An area-lit analytic shape is a single entry (-1, shape, area) of ``lights``, and
@@ -104,7 +105,7 @@ def emitter_tables(desc: Any, lights: list[tuple[int, int, float]],
                 raise CompileError(f"{what}: only one environment emitter (constant or "
                                    "envmap) can be specified per scene", em.loc)
             env = len(EK)
-        row, table = _emitter_row(em, what, variant)
+        row, table = _emitter_row(em, what, model)
         if table is not None:
             ENV = table
         EK.append((KINDS[em.type], 0, 0, 0))
@@ -118,17 +119,17 @@ def emitter_tables(desc: Any, lights: list[tuple[int, int, float]],
         np.ascontiguousarray(ENV, np.float32), len(EK), env)
 
 
-def _put_color(row: np.ndarray, value: Any, what: str, loc: Any, variant: str) -> None:
+def _put_color(row: np.ndarray, value: Any, what: str, loc: Any, model: ColorModel) -> None:
     """An emitted colour at row[0:3] with its scale at row[23] (lights.rdsl load_spectrum)."""
-    row[0:3], row[23] = emission_row(_color(value, what, loc), variant)
+    row[0:3], row[23] = emission_row(_color(value, what, loc), model)
 
 
-def _emitter_row(em: Any, what: str, variant: str = "rgb"
+def _emitter_row(em: Any, what: str, model: ColorModel = RGB
                  ) -> tuple[np.ndarray, np.ndarray | None]:
     """The E row of one non-area emitter, and its ENV table for an envmap."""
     p, row = em.params, np.zeros(STRIDE)
     if em.type == "point":
-        _put_color(row, p["intensity"], f"{what}: 'intensity'", em.loc, variant)
+        _put_color(row, p["intensity"], f"{what}: 'intensity'", em.loc, model)
         row[3:6] = p["to_world"][:3, 3]
     elif em.type == "spot":
         if p.get("texture") is not None:
@@ -142,23 +143,23 @@ def _emitter_row(em: Any, what: str, variant: str = "rgb"
             raise CompileError(f"{what}: 'beam_width' ({p['beam_width']}) must be between 0 "
                                f"and 'cutoff_angle' ({p['cutoff_angle']})", em.loc)
         lin = _linear_part(p["to_world"], what, em.loc, rigid=False)
-        _put_color(row, p["intensity"], f"{what}: 'intensity'", em.loc, variant)
+        _put_color(row, p["intensity"], f"{what}: 'intensity'", em.loc, model)
         row[3:6] = p["to_world"][:3, 3]
         row[6:15] = np.linalg.inv(lin).reshape(-1)
         row[15:19] = (np.cos(cutoff), np.cos(beam), cutoff,
                       1.0 / (cutoff - beam) if cutoff > beam else 3.0e38)
     elif em.type == "directional":
-        _put_color(row, p["irradiance"], f"{what}: 'irradiance'", em.loc, variant)
+        _put_color(row, p["irradiance"], f"{what}: 'irradiance'", em.loc, model)
         row[3:6] = p["direction"]
     elif em.type == "constant":
-        _put_color(row, p["radiance"], f"{what}: 'radiance'", em.loc, variant)
+        _put_color(row, p["radiance"], f"{what}: 'radiance'", em.loc, model)
     else:  # envmap
         if p.get("filter_type", "bilinear") != "bilinear":
             raise CompileError(f"{what}: filter_type '{p['filter_type']}' is not supported "
                                "by the renderer yet (supported: bilinear)", em.loc)
         lin = _linear_part(p["to_world"], what, em.loc, rigid=True)
         image = read_bitmap(p["filename"], what, em.loc)
-        table, (w, h) = envmap_tables(image, variant)
+        table, (w, h) = envmap_tables(image, model)
         row[0:3] = (float(p["scale"]), w, h)
         row[3:12] = lin.reshape(-1)
         row[12:21] = np.linalg.inv(lin).reshape(-1)
@@ -179,11 +180,11 @@ def read_bitmap(path: str | Path, what: str = "bitmap", loc: Any = None) -> np.n
         raise CompileError(f"{what}: cannot read `{path}`: {e}", loc) from None
 
 
-def envmap_tables(image: np.ndarray, variant: str = "rgb"
+def envmap_tables(image: np.ndarray, model: ColorModel = RGB
                   ) -> tuple[np.ndarray, tuple[int, int]]:
     """ENV for a lat-long image (H, W, 3): texels, then the marginal and conditional CDFs
     of the cells between texel rows and columns (stdlib/emitter/envmap.rdsl).  A texel is
-    4 floats, an emitted colour as ``variant`` stores it (``emission_texels``); the sampling
+    4 floats, an emitted colour as ``model`` stores it (``emission_texels``); the sampling
     density follows the RGB luminance in every variant."""
     img = np.asarray(image, np.float64)
     if img.shape[0] == 1:  # one row: constant in theta, two rows for the poles
@@ -205,6 +206,6 @@ def envmap_tables(image: np.ndarray, variant: str = "rgb"
     cond = np.concatenate([np.zeros((h - 1, 1)), np.cumsum(cells, axis=1) / safe], axis=1)
     cond[row_sums <= 0] = np.linspace(0.0, 1.0, w + 1)
     cond[:, -1] = 1.0
-    texels = emission_texels(img.reshape(-1, 3), variant)
+    texels = emission_texels(img.reshape(-1, 3), model)
     table = np.concatenate([texels.reshape(-1), marginal, cond.reshape(-1)])
     return np.ascontiguousarray(table, np.float32), (w, h)

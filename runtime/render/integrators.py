@@ -21,6 +21,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from ...compiler.diagnostics import CompileError
+from ...core.color import ColorModel
 
 __all__ = ["AOV_TYPES", "INTEGRATORS", "STOKES_CHANNELS", "IntegratorPlan", "integrator_plan"]
 
@@ -56,12 +57,12 @@ class IntegratorPlan:
         return ([*STOKES_CHANNELS] if self.stokes is not None else []) + \
             [f"{name}.{s}" for name, kind in self.aovs for s in AOV_TYPES[kind][0]]
 
-    def check_variant(self, variant: str) -> None:
+    def check_variant(self, model: ColorModel) -> None:
         """A ``stokes`` integrator needs a polarized variant: an error at its XML otherwise."""
-        if self.stokes is not None and not variant.endswith("_polarized"):
+        if self.stokes is not None and not model.polarized:
             raise CompileError(
                 f"stokes: the Stokes integrator needs a polarized variant (`mono_polarized` or "
-                f"`spectral_polarized`); the `{variant}` variant carries no polarization, so "
+                f"`spectral_polarized`); the `{model.name}` variant carries no polarization, so "
                 "there are no S0..S3 channels to write and nothing is rendered (Mitsuba 3 "
                 "refuses it too: \"This integrator should only be used in polarized mode!\"). "
                 "Render with a polarized variant, or use the nested integrator directly.",

@@ -18,6 +18,7 @@ from typing import Any
 
 import numpy as np
 
+from ...compiler.build import Build
 from ...compiler.diagnostics import CompileError
 from ...compiler.passes.specialize import (
     PARAM_BUFFER,
@@ -26,6 +27,8 @@ from ...compiler.passes.specialize import (
     describe,
     parameter_slots,
 )
+from ...compiler.targets import Target
+from ...core.color import RGB, ColorModel
 from ..scene import load_scene_description
 from .bsdfs import (
     BSDF_PLUGINS,
@@ -88,12 +91,12 @@ def _flat(v: np.ndarray, f: np.ndarray, normals: Any) -> bool:
     return bool(len(f)) and bool(np.all(np.einsum("mkj,mj->mk", n, ng) > 1 - 1e-6))
 
 
-def flatten(desc: Any, triangulate: bool = False, variant: str = "rgb"
+def flatten(desc: Any, triangulate: bool = False, model: ColorModel = RGB
             ) -> tuple[SceneBuffers, list[Instance], list[Instance]]:
     """Concatenate the scene's meshes and collect its BSDF and emitter instances.  Analytic
     spheres and disks become Embree user geometry with a record in ``P`` (after the
     vertices), unless ``triangulate`` asks for every shape's triangle mesh.  Colours in
-    buffers are stored as ``variant`` reads them (runtime/render/colors.py)."""
+    buffers are stored as ``model`` reads them (runtime/render/colors.py)."""
     P, N, UV, F, G = [], [], [], [], []
     bsdfs: list[Instance] = []
     bsdf_ids: dict[int, int] = {}
@@ -159,9 +162,9 @@ def flatten(desc: Any, triangulate: bool = False, variant: str = "rgb"
 
     bufs = SceneBuffers(cat(P, np.float32), cat(N, np.float32), cat(UV, np.float32),
                         cat(F, np.int32), cat(G, np.int32),
-                        emitter_tables(desc, lights, len(emitters), analytic_lights, variant),
+                        emitter_tables(desc, lights, len(emitters), analytic_lights, model),
                         meshes)
-    bufs.T, bufs.textures = textures.buffer(variant), textures.instances
+    bufs.T, bufs.textures = textures.buffer(model), textures.instances
     return bufs, bsdfs, emitters
 
 
@@ -241,15 +244,15 @@ def _aov_fields(plan: IntegratorPlan, channels: int, spectral: bool = False
 
 
 def kernel_source(desc: Any, bufs: SceneBuffers, bsdfs: list[Instance],
-                  emitters: list[Instance], channels: int = 3, variant: str = "rgb") -> str:
+                  emitters: list[Instance], model: ColorModel = RGB) -> str:
     """The scene's render kernel in rdsl: constants of this scene, stdlib code for the rest.
     A spectral kernel samples its wavelengths first and gives the film linear sRGB."""
-    spectral = variant.removesuffix("_polarized") == "spectral"
+    spectral, channels = model.spectral, model.channels
     # a polarized L is a Mueller matrix: the film records the intensity (entry [0][0], the
     # first Stokes component for the unpolarized emitters), as Mitsuba's film does
-    mono_pol = variant == "mono_polarized"
+    mono_pol = model.mono and model.polarized
     plan = integrator_plan(desc.integrator)
-    plan.check_variant(variant)
+    plan.check_variant(model)
     aov_fields = _aov_fields(plan, channels, spectral)
     cam = camera_uniforms(desc.sensor)
     film = film_uniforms(desc.sensor.film, 1, channels=channels + len(plan.aov_channel_names()))
@@ -326,31 +329,30 @@ def kernel_source(desc: Any, bufs: SceneBuffers, bsdfs: list[Instance],
 
 
 class Scene:
-    """A loaded scene, compiled for one variant and target.  ``render`` returns the image
-    as a float32 (H, W, C) array."""
+    """A loaded scene, compiled for one build (target and colour model).  ``render``
+    returns the image as a float32 (H, W, C) array."""
 
-    def __init__(self, path: str | Path, variant: str = "rgb", target: str = "host",
-                 specialize: bool = True, triangulate: bool = False,
-                 **defaults: Any) -> None:
+    def __init__(self, path: str | Path, build: Build, specialize: bool = True,
+                 triangulate: bool = False, **defaults: Any) -> None:
         from ..embree import EmbreeScene
 
         self.path = Path(path)
-        self.variant = variant
+        self.build = build
+        model = build.model
         t0 = time.perf_counter()
         self.desc = load_scene_description(self.path, **defaults)
         self.spp = int(self.desc.sensor.sampler.params.get("sample_count", 4))
         self.seed = int(self.desc.sensor.sampler.params.get("seed", 0))
-        integrator_plan(self.desc.integrator).check_variant(variant)
-        self.buffers, self.bsdfs, self.emitters = flatten(self.desc, triangulate, variant)
-        for message in [*polarization_warnings(self.desc, variant),
-                        *dispersion_warnings(self.desc, variant)]:
+        integrator_plan(self.desc.integrator).check_variant(model)
+        self.buffers, self.bsdfs, self.emitters = flatten(self.desc, triangulate, model)
+        for message in [*polarization_warnings(self.desc, model),
+                        *dispersion_warnings(self.desc, model)]:
             warnings.warn(message, stacklevel=2)
         self.load_seconds = time.perf_counter() - t0
         # two levels (a BVH per shape under one over the shapes): scenes of a few large
         # shapes, such as the Cornell box, trace about a third faster than through one BVH
         # over all triangles (bench/render_vs_mitsuba.py)
         self.embree = EmbreeScene(self.buffers.meshes, quality="low", mesh_quality="high")
-        self.target = target
         self.specialize = specialize
         self.params = np.zeros(1, np.float32)  # PRM of the generic build
         self._module = None
@@ -366,7 +368,7 @@ class Scene:
         if self._module is not None:
             return self._module
         src = kernel_source(self.desc, self.buffers, self.bsdfs, self.emitters,
-                            1 if self.variant.startswith("mono") else 3, self.variant)
+                            self.build.model)
         bsdfs, leaves = split_leaves(self.bsdfs)  # combinators reach leaves by id
         kinds = tuple(sorted({int(k) for k in self.buffers.lights.EK[0::4]}))
         shapes = tuple(sorted({_shape_kind(int(g)) for g in self.buffers.G[3::4]}))
@@ -375,8 +377,8 @@ class Scene:
         self.report = describe(scene) + self._folding(scene)
         self.kernel_src, self.scene_spec = src, scene
         if not self.specialize:  # generic: parameter values come from PRM at run time
-            scene, self.params = parameter_slots(scene, self.variant)
-        mod = jit(src, target=self.target, variant=self.variant, scene=scene,
+            scene, self.params = parameter_slots(scene, self.build.model)
+        mod = jit(src, build=self.build, scene=scene,
                   filename=str(self.path.with_suffix(".rdsl")))
         self._module = mod
         self.compile_seconds = mod.compile_seconds
@@ -385,7 +387,7 @@ class Scene:
 
     def _folding(self, scene: SceneSpec) -> list[str]:
         """What the build folds (specialized) or reads at run time (generic), for the report."""
-        _, values = parameter_slots(scene, self.variant)
+        _, values = parameter_slots(scene, self.build.model)
         n = sum(1 for i in [*scene.bsdfs, *scene.bsdf_leaves, *scene.textures,
                             *scene.emitters] if i.params)
         kinds = {v: k for k, v in EMITTER_KINDS.items()}
@@ -417,9 +419,8 @@ class Scene:
 
         self.compile()
         counts = []
-        for scene in (self.scene_spec, parameter_slots(self.scene_spec, self.variant)[0]):
-            module, _ = compile_kernels(self.kernel_src, target=self.target,
-                                        variant=self.variant, scene=scene,
+        for scene in (self.scene_spec, parameter_slots(self.scene_spec, self.build.model)[0]):
+            module, _ = compile_kernels(self.kernel_src, self.build, scene=scene,
                                         filename=str(self.path.with_suffix(".rdsl")))
             counts.append(sum(1 for _ in module.functions["render_sample"].walk()))
         return counts[0], counts[1]
@@ -428,7 +429,7 @@ class Scene:
     def channel_names(self) -> list[str]:
         """The image's channels, as the EXR names them: R, G, B (Y in mono), then the AOVs of
         an ``aov`` integrator (runtime/render/integrators.py)."""
-        base = ["Y"] if self.variant.startswith("mono") else ["R", "G", "B"]
+        base = ["Y"] if self.build.model.mono else ["R", "G", "B"]
         return base + integrator_plan(self.desc.integrator).aov_channel_names()
 
     def render(self, spp: int | None = None, seed: int | None = None,
@@ -495,9 +496,13 @@ def _film_samples(out: dict[str, Any], ns: int) -> np.ndarray:
     return np.ascontiguousarray(np.stack(rows)).reshape(-1)
 
 
-def load_scene(path: str | Path, variant: str = "rgb", target: str = "host",
-               specialize: bool = True, triangulate: bool = False, **defaults: Any) -> Scene:
+def load_scene(path: str | Path, variant: str | ColorModel = "rgb",
+               target: str | Target = "host", specialize: bool = True,
+               triangulate: bool = False, *, build: Build | None = None,
+               **defaults: Any) -> Scene:
     """Load a Mitsuba 3 XML scene for rendering (``-D name=value`` as keyword args).
-    ``specialize=False`` gives the generic build (parameters read at run time)."""
-    return Scene(path, variant=variant, target=target, specialize=specialize,
-                 triangulate=triangulate, **defaults)
+    ``specialize=False`` gives the generic build (parameters read at run time).  ``build``,
+    when given, replaces ``variant`` and ``target``; a bad name of either is a diagnostic
+    before the scene is read."""
+    build = build or Build.of(target, variant)
+    return Scene(path, build, specialize=specialize, triangulate=triangulate, **defaults)

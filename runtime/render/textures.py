@@ -24,6 +24,7 @@ import numpy as np
 
 from ...compiler.diagnostics import CompileError
 from ...compiler.passes.specialize import Instance, SpectrumValue, TextureRef
+from ...core.color import RGB, ColorModel
 from .colors import encode_texels, spectrum_value
 
 # Mitsuba plugin -> rdsl file under stdlib/
@@ -108,13 +109,13 @@ class TextureTable:
             self.instances.append(self._instance(plugin, what, usage))
         return TextureRef(self._ids[key][1])
 
-    def buffer(self, variant: str = "rgb") -> np.ndarray:
-        """``T``: every bitmap's texels, those of colour textures as ``variant`` stores
+    def buffer(self, model: ColorModel = RGB) -> np.ndarray:
+        """``T``: every bitmap's texels, those of colour textures as ``model`` stores
         colours (never empty, so the kernels get a valid pointer)."""
         if not self._texels:
             return np.zeros(3, np.float32)
         return np.ascontiguousarray(np.concatenate(
-            [encode_texels(t, variant) if colour else t for t, colour in self._texels]),
+            [encode_texels(t, model) if colour else t for t, colour in self._texels]),
             np.float32)
 
     def _instance(self, plugin: Any, what: str, usage: str) -> Instance:

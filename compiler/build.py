@@ -1,0 +1,44 @@
+"""What one compilation is for: a :class:`Build` holds the CPU target and the colour model.
+
+Entry points (the command line, ``rdsl.jit``, ``rdsl.load_scene``) turn the user's target and
+variant names into a Build with :meth:`Build.of`, at once, so that a bad name is reported
+before any file is read; everything below them takes the Build or its parts.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from ..core.color import MODELS, VARIANTS, ColorModel
+from .diagnostics import CompileError
+from .targets import Target, get_target
+
+
+@dataclass(frozen=True)
+class Build:
+    """A code-generation target and the colour model its kernels compute in."""
+
+    target: Target
+    model: ColorModel
+
+    @classmethod
+    def of(cls, target: str | Target = "host", variant: str | ColorModel = "rgb") -> Build:
+        """The build for a target name (``host`` resolves to this machine's widest) and a
+        variant name; a name that is neither raises a diagnostic listing the valid ones."""
+        return cls(get_target(target), color_model(variant))
+
+    @property
+    def width(self) -> int:
+        """SIMD lanes per kernel call."""
+        return self.target.width
+
+
+def color_model(variant: str | ColorModel) -> ColorModel:
+    """The colour model of a variant name, or a diagnostic naming the valid variants."""
+    if isinstance(variant, ColorModel):
+        return variant
+    model = MODELS.get(variant)
+    if model is None:
+        raise CompileError(f"unknown variant `{variant}` (valid variants: "
+                           f"{', '.join(VARIANTS)})")
+    return model

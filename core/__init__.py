@@ -1,0 +1,1 @@
+"""Definitions shared by the compiler and the runtime, importing nothing else from rdsl."""
