@@ -9,7 +9,8 @@ pass names separated by `→`, a bracketed name being a pass that runs only some
 ``pipeline()`` in its order: with brackets dropped, the pipeline for a scene, and without the
 bracketed names, the one without.  A line with no brackets may state either.
 
-IR listings: the examples of docs/ir.md are the printer's output for the golden programs.
+IR listings and diagnostics: the examples of docs/ir.md are the printer's output for the
+golden programs, and the diagnostic of docs/language.md is a golden one.
 """
 
 from __future__ import annotations
@@ -66,3 +67,9 @@ def test_ir_md_listings_are_printer_output() -> None:
     assert lerp == printed
     golden = (ROOT / "tests" / "golden" / "loop.expected").read_text()
     assert golden.startswith("// ----- after lower -----\n" + count)
+
+
+def test_language_md_diagnostic_is_the_golden_one() -> None:
+    text = (ROOT / "docs" / "language.md").read_text()
+    golden = (ROOT / "tests" / "golden" / "diagnostics" / "type_error.expected").read_text()
+    assert f"```\n{golden}```\n" in text
