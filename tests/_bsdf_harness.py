@@ -35,8 +35,9 @@ from typing import Any
 
 import numpy as np
 import rdsl
-from rdsl.compiler.passes.specialize import Instance, SceneSpec, SpectrumValue, parameter_slots
-from rdsl.runtime import spectral as S
+from rdsl.compiler.passes.specialize import parameter_slots
+from rdsl.core import spectral as S
+from rdsl.core.scene_spec import Instance, SceneSpec, SpectrumValue
 from rdsl.runtime.render.bsdfs import BSDF_PLUGINS, bsdf_instance, split_leaves
 from rdsl.runtime.scene.loader import load_scene_description
 

@@ -176,7 +176,7 @@ def test_spectral_tabulated_spectra_are_read_from_prm(tmp_path, monkeypatch):
     from rdsl.compiler.driver import compile_kernels
     from rdsl.compiler.ir import Op
     from rdsl.compiler.passes.specialize import parameter_slots
-    from rdsl.runtime import spectral
+    from rdsl.core import spectral
 
     monkeypatch.setenv("RDSL_CACHE_DIR", str(tmp_path / "cache"))
     path = tmp_path / "metals.xml"

@@ -53,7 +53,7 @@ def package_files(root: Path = ROOT) -> list[Path]:
 
 
 def module_name(path: Path, root: Path = ROOT) -> str:
-    """``compiler/passes/lift.py`` -> ``rdsl.compiler.passes.lift`` (``__init__`` is the package)."""
+    """``compiler/passes/lift.py`` -> ``rdsl.compiler.passes.lift`` (``__init__``: the package)."""
     parts = list(path.relative_to(root).with_suffix("").parts)
     if parts[-1] == "__init__":
         parts.pop()

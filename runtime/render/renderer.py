@@ -19,13 +19,8 @@ from typing import Any
 import numpy as np
 
 from ...compiler.diagnostics import CompileError
-from ...compiler.passes.specialize import (
-    PARAM_BUFFER,
-    Instance,
-    SceneSpec,
-    describe,
-    parameter_slots,
-)
+from ...compiler.passes.specialize import PARAM_BUFFER, describe, parameter_slots
+from ...core.scene_spec import Instance, SceneSpec
 from ..scene import load_scene_description
 from .bsdfs import (
     BSDF_PLUGINS,
