@@ -13,7 +13,7 @@ import pytest
 
 pytest.importorskip("rdsl.runtime.embree")
 
-from rdsl.compiler.cli import main
+from rdsl.cli import main
 from rdsl.runtime.render.renderer import load_scene
 from test_scene_bsdfs import BSDFS, OBLIQUE, scene_xml
 

@@ -170,7 +170,7 @@ def test_lift_gives_concrete_types():
 
 
 def test_cli_prints_lifted_ir(tmp_path, capsys):
-    from rdsl.compiler.cli import main
+    from rdsl.cli import main
 
     src = tmp_path / "k.rdsl"
     src.write_text(KERNEL)

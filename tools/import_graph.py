@@ -34,12 +34,13 @@ LAYER_ORDER = (
 
 @dataclass(frozen=True)
 class Import:
-    """One import statement: where it is and the rdsl module it names."""
+    """One import statement: where it is, the rdsl module it names and what it takes from it."""
 
     path: Path      # the importing file
     line: int
     source: str     # the importing module, e.g. rdsl.compiler.passes.lift
     target: str     # the imported module, e.g. rdsl.core.spectral
+    names: tuple[str, ...] = ()  # attributes taken by ``from target import ...`` (not modules)
 
 
 def package_files(root: Path = ROOT) -> list[Path]:
@@ -73,23 +74,28 @@ def _resolve_from(node: ast.ImportFrom, module: str, is_package: bool) -> str | 
 
 
 def imports_of(path: Path, known: frozenset[str], root: Path = ROOT) -> list[Import]:
-    """The rdsl imports of one file; ``from pkg import mod`` names the module ``pkg.mod``."""
+    """The rdsl imports of one file, one per statement and module: ``from pkg import mod``
+    names the module ``pkg.mod``, ``from pkg import attr`` the module ``pkg`` (with ``attr``
+    in :attr:`Import.names`)."""
     module = module_name(path, root)
     tree = ast.parse(path.read_text(), filename=str(path))
     found: list[Import] = []
     for node in ast.walk(tree):
+        targets: dict[str, list[str]] = {}
         if isinstance(node, ast.Import):
-            targets = [alias.name for alias in node.names]
+            for alias in node.names:
+                targets.setdefault(alias.name, [])
         elif isinstance(node, ast.ImportFrom):
             base = _resolve_from(node, module, path.name == "__init__.py")
-            targets = [
-                f"{base}.{a.name}" if f"{base}.{a.name}" in known else base for a in node.names
-            ] if base else []
-        else:
-            continue
-        for target in dict.fromkeys(targets):  # one edge per statement and module
+            for alias in node.names if base else ():
+                sub = f"{base}.{alias.name}"
+                if sub in known:
+                    targets.setdefault(sub, [])
+                else:
+                    targets.setdefault(base, []).append(alias.name)
+        for target, names in targets.items():
             if target == PACKAGE or target.startswith(PACKAGE + "."):
-                found.append(Import(path, node.lineno, module, target))
+                found.append(Import(path, node.lineno, module, target, tuple(names)))
     return found
 
 
