@@ -1,26 +1,27 @@
-"""The ``rdsl`` command line: ``check``, ``ir`` and ``compile``.
+"""The compiler's subcommands of the ``rdsl`` command line: ``check``, ``ir`` and ``compile``.
 
-User mistakes print diagnostics and exit with status 1; they never show a traceback.
+:func:`add_commands` declares them on the top-level parser of ``rdsl/cli.py``, which adds the
+runtime's ``render`` and turns a :class:`CompileError` raised here into diagnostics and exit
+status 1 (a user mistake never shows a traceback).
 """
 
 from __future__ import annotations
 
 import argparse
 import sys
+from collections.abc import Callable
 from pathlib import Path
 
 from ..core.color import VARIANTS
 from .diagnostics import CompileError
-from .driver import InternalError
+
+Command = Callable[[argparse.Namespace], int]
 
 _VARIANTS_HELP = ", ".join(VARIANTS) + " (default: rgb)"
 
 
-def _parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="rdsl", description="A compiler for physically based "
-                                "rendering.")
-    sub = p.add_subparsers(dest="cmd", required=True)
-
+def add_commands(sub: argparse._SubParsersAction) -> dict[str, Command]:
+    """Add ``check``, ``ir`` and ``compile`` to ``sub``; returns their handlers by name."""
     c = sub.add_parser("check", help="parse and type-check a .rdsl file")
     c.add_argument("file")
 
@@ -43,46 +44,7 @@ def _parser() -> argparse.ArgumentParser:
                         "(default: the source's name in the current folder)")
     k.add_argument("--emit", choices=["lib", "llvm", "asm", "obj"], default="lib",
                    help="what to produce; llvm/asm go to stdout unless -o is given")
-    r = sub.add_parser("render", help="render a Mitsuba 3 XML scene")
-    r.add_argument("scene")
-    r.add_argument("-o", "--output", default=None,
-                   help="output EXR (default: the scene's name + .exr in the current "
-                        "folder); a tonemapped PNG is written beside it")
-    r.add_argument("--spp", type=int, default=None, help="samples per pixel (default: the "
-                   "scene's sampler)")
-    r.add_argument("--seed", type=int, default=None)
-    r.add_argument("--target", default="host")
-    r.add_argument("--variant", default="rgb", help=_VARIANTS_HELP)
-    r.add_argument("--threads", type=int, default=None, help="default: all cores")
-    r.add_argument("-D", dest="defines", action="append", default=[], metavar="NAME=VALUE",
-                   help="set a scene parameter declared with <default>")
-    r.add_argument("--report", action="store_true",
-                   help="print what specialization did and the kernel sizes")
-    r.add_argument("--no-specialize", dest="specialize", action="store_false",
-                   help="the generic build: parameters read at run time, every emitter kind")
-    r.add_argument("--triangulate", action="store_true",
-                   help="render spheres and disks as triangle meshes, not analytic shapes")
-    r.add_argument("--quiet", action="store_true", help="no progress bar")
-    return p
-
-
-def main(argv: list[str] | None = None) -> int:
-    args = _parser().parse_args(argv)
-    try:
-        return {"check": _check, "ir": _ir, "compile": _compile,
-                "render": _render}[args.cmd](args)
-    except CompileError as e:
-        print(e.format(), file=sys.stderr)
-        return 1
-    except InternalError as e:
-        print(f"rdsl: {e}\nThis is a bug in rdsl; please report it with the input file.",
-              file=sys.stderr)
-        return 2
-    except KeyboardInterrupt:
-        print("interrupted", file=sys.stderr)
-        return 130
-    finally:
-        sys.stdout.flush()
+    return {"check": _check, "ir": _ir, "compile": _compile}
 
 
 def _require_file(path: str) -> Path:
@@ -172,12 +134,6 @@ def _compile(args: argparse.Namespace) -> int:
     return 0
 
 
-def _render(args: argparse.Namespace) -> int:
-    from ..runtime.render.cli import render_command
-
-    return render_command(args)
-
-
 def _refuse_input(out: Path, src: Path) -> None:
     if out.resolve() == src:
         raise CompileError(f"{out}: error: refusing to overwrite the input file")
@@ -192,7 +148,3 @@ def _write(path: Path, data: str | bytes) -> None:
             path.write_text(data)
     except OSError as e:
         raise CompileError(f"{path}: error: cannot write output: {e.strerror}") from e
-
-
-if __name__ == "__main__":
-    sys.exit(main())

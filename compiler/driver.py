@@ -12,6 +12,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import TextIO
 
+from ..core.scene_spec import SceneSpec
 from .build import Build
 from .diagnostics import CompileError
 from .ir import Module
@@ -20,7 +21,7 @@ from .passes.inline import Inline
 from .passes.lift import Lift
 from .passes.optimize import Optimize
 from .passes.scalarize import Scalarize
-from .passes.specialize import SceneSpec, Specialize
+from .passes.specialize import Specialize
 from .passes.vectorize import Vectorize
 from .sources import PRELUDE, STDLIB, is_path, source_files  # noqa: F401 (re-exported)
 

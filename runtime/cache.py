@@ -31,13 +31,12 @@ def cache_dir() -> Path:
 @lru_cache(maxsize=1)
 def compiler_fingerprint() -> str:
     """A hash of the compiler's Python sources and grammar, so a changed compiler misses
-    (``core/`` and ``runtime/spectral.py`` included: ``lift`` builds its types and tables
-    with them)."""
+    (``core`` included: ``lift`` builds its types and tables with it)."""
     root = Path(__file__).resolve().parent.parent
     h = hashlib.sha256()
     files = [p for sub in ("compiler", "dsl", "core") for p in sorted((root / sub).rglob("*"))
              if p.suffix in (".py", ".lark") and p.is_file()]
-    for p in [*files, root / "runtime" / "spectral.py"]:
+    for p in files:
         h.update(str(p.relative_to(root)).encode())
         h.update(p.read_bytes())
     return h.hexdigest()

@@ -1,52 +1,42 @@
-"""Embree 4 ray tracing: the library, its C ABI, and a scene of triangle meshes.
+"""Embree 4 ray tracing from Python: the library, its device, and a scene of triangle meshes.
 
-The renderer's compiled kernels call ``rtcIntersectN``/``rtcOccludedN`` directly. This module
-gives them what they need:
+The renderer's compiled kernels call ``rtcIntersectN``/``rtcOccludedN`` directly (the
+backend emits those calls: ``compiler/backends/embree_llvm.py``); this module gives them a
+scene to trace, through ctypes:
 
 - :func:`load_embree` finds ``libembree4`` inside the ``embreex`` wheel and declares the part
   of the C API rdsl uses;
 - :func:`symbol_addresses` and :func:`bind_llvm_symbols` hand the query functions to an
-  in-process JIT, and :func:`link_args` to ``cc`` when linking a ``.so``;
-- :func:`llvm_rayhit_type`, :func:`llvm_ray_type` and :func:`declare_query` describe the
-  ``RTCRayHitN``/``RTCRayN`` structs and the query functions to llvmlite, with the exact
-  layout of ``embree4/rtcore_ray.h``;
-- :class:`EmbreeScene` builds a scene from triangle meshes and traces numpy batches of rays.
-  That path loops in Python over 16-ray packets: it is for tests and tooling, not rendering.
+  in-process JIT (``cc`` links a ``.so`` with :func:`rdsl.core.embree_abi.link_args`);
+- :class:`EmbreeScene` builds a scene from triangle meshes (and the analytic shapes of
+  ``embree_user.py``) and traces numpy batches of rays.  That path loops in Python over
+  16-ray packets: it is for tests and tooling, not rendering.
 
-Layout (Embree 4.4 release builds: ``RTC_MAX_INSTANCE_LEVEL_COUNT`` = 1 and
-``RTC_GEOMETRY_INSTANCE_ARRAY`` on). A width-N packet (N = 4, 8, 16) is structure of arrays,
-aligned to 4N bytes; every field is an ``[N x float|uint]`` row:
-
-    ray: org_x org_y org_z tnear dir_x dir_y dir_z time tfar mask id flags   (12 rows)
-    hit: Ng_x Ng_y Ng_z u v primID geomID instID[1] instPrimID[1]            (9 rows)
-
-The single ray (N = 1) has the same fields as scalars; ``RTCRay`` and ``RTCHit`` are each
-aligned (and padded) to 16 bytes, so ``RTCRayHit`` is 48 + 48 bytes. A build without
-instance arrays never writes the ``instPrimID`` row, so this layout is safe for it as well.
+The packet layouts and constants it shares with the backend are in
+:mod:`rdsl.core.embree_abi`.
 """
 
 from __future__ import annotations
 
 import contextlib
 import ctypes
-import importlib.metadata
-import os
 import threading
 from collections.abc import Sequence
-from dataclasses import dataclass
-from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-RTC_INVALID_GEOMETRY_ID = 0xFFFFFFFF
-WIDTHS = (1, 4, 8, 16)
-QUERY_FUNCTIONS = tuple(f"rtc{q}{w}" for q in ("Intersect", "Occluded") for w in WIDTHS)
-
-RAY_FIELDS = ("org_x", "org_y", "org_z", "tnear", "dir_x", "dir_y", "dir_z", "time",
-              "tfar", "mask", "id", "flags")
-HIT_FIELDS = ("Ng_x", "Ng_y", "Ng_z", "u", "v", "primID", "geomID", "instID", "instPrimID")
-UINT_FIELDS = frozenset({"mask", "id", "flags", "primID", "geomID", "instID", "instPrimID"})
+from ..core.embree_abi import (
+    QUERIES,
+    QUERY_FUNCTIONS,
+    RTC_INVALID_GEOMETRY_ID,
+    UINT_FIELDS,
+    WIDTHS,
+    EmbreeError,
+    PacketLayout,
+    check_width,
+    embree_library_path,
+)
 
 # enum values from embree4/rtcore_*.h
 _GEOMETRY_TYPE_TRIANGLE = 0
@@ -58,58 +48,6 @@ SCENE_FLAGS = {"dynamic": 1, "compact": 2, "robust": 4}
 ERROR_NAMES = {0: "RTC_ERROR_NONE", 1: "RTC_ERROR_UNKNOWN", 2: "RTC_ERROR_INVALID_ARGUMENT",
                3: "RTC_ERROR_INVALID_OPERATION", 4: "RTC_ERROR_OUT_OF_MEMORY",
                5: "RTC_ERROR_UNSUPPORTED_CPU", 6: "RTC_ERROR_CANCELLED"}
-
-
-class EmbreeError(RuntimeError):
-    """Embree is missing, or an Embree call reported an error."""
-
-
-# --------------------------------------------------------------------------- layout
-
-
-@dataclass(frozen=True)
-class PacketLayout:
-    """Where each field of an ``RTCRayHitN`` (or ``RTCRayN``) lies, in 4-byte words."""
-
-    width: int
-    with_hit: bool = True
-
-    @property
-    def align(self) -> int:
-        """Required alignment in bytes: 16, 16, 32, 64 for widths 1, 4, 8, 16."""
-        return max(16, 4 * self.width)
-
-    @property
-    def ray_words(self) -> int:
-        return 12 * self.width
-
-    @property
-    def words(self) -> int:
-        """Size of the whole struct in words (a multiple of the alignment)."""
-        if not self.with_hit:
-            return self.ray_words
-        hit = len(HIT_FIELDS) * self.width
-        hit = -(-hit // (self.align // 4)) * (self.align // 4)  # RTCHit pads to 16 bytes
-        return self.ray_words + hit
-
-    @property
-    def nbytes(self) -> int:
-        return 4 * self.words
-
-    def offset(self, field: str) -> int:
-        """Word offset of lane 0 of ``field``; lane i is at ``offset + i``."""
-        if field in RAY_FIELDS:
-            return RAY_FIELDS.index(field) * self.width
-        if self.with_hit and field in HIT_FIELDS:
-            return self.ray_words + HIT_FIELDS.index(field) * self.width
-        raise KeyError(f"no field {field!r} in {'RTCRayHit' if self.with_hit else 'RTCRay'}"
-                       f"{self.width if self.width > 1 else ''}")
-
-
-def _check_width(width: int) -> int:
-    if width not in WIDTHS:
-        raise ValueError(f"width: Embree packets are 1, 4, 8 or 16 wide, got {width!r}")
-    return width
 
 
 # --------------------------------------------------------------------------- library
@@ -138,37 +76,9 @@ _SIGNATURES: dict[str, tuple[Any, list[Any]]] = {
     "rtcAttachGeometry": (ctypes.c_uint, [_P, _P]),
     "rtcReleaseGeometry": (None, [_P]),
     # rtcIntersect1(scene, rayhit, args); rtcIntersectN(valid, scene, rayhit, args)
-    **{f"rtc{q}1": (None, [_P, _P, _P]) for q in ("Intersect", "Occluded")},
-    **{f"rtc{q}{w}": (None, [_P, _P, _P, _P]) for q in ("Intersect", "Occluded")
-       for w in WIDTHS[1:]},
+    **{f"rtc{q}1": (None, [_P, _P, _P]) for q in QUERIES},
+    **{f"rtc{q}{w}": (None, [_P, _P, _P, _P]) for q in QUERIES for w in WIDTHS[1:]},
 }
-
-
-def embree_library_path() -> Path:
-    """The ``libembree4`` shared library shipped in the ``embreex`` wheel.
-
-    ``$RDSL_EMBREE_LIBRARY`` overrides the search (a path to a libembree4 of version 4)."""
-    override = os.environ.get("RDSL_EMBREE_LIBRARY")
-    if override:
-        p = Path(override)
-        if not p.is_file():
-            raise EmbreeError(f"$RDSL_EMBREE_LIBRARY names {p}, which is not a file")
-        return p
-    try:
-        dist = importlib.metadata.distribution("embreex")
-    except importlib.metadata.PackageNotFoundError:
-        raise EmbreeError("Embree 4 is not available: the `embreex` package is not installed "
-                          "(pip install 'embreex>=4.3,<5'); it ships libembree4") from None
-    found = []
-    for f in dist.files or ():
-        name = f.name
-        if name.startswith("libembree4") and (".so" in name or name.endswith(".dylib")):
-            found.append(Path(dist.locate_file(f)))
-    found = sorted(p for p in found if p.is_file())
-    if not found:
-        raise EmbreeError(f"the installed `embreex` {dist.version} has no libembree4 shared "
-                          "library among its files; reinstall it from a binary wheel")
-    return found[0]
 
 
 def load_embree() -> ctypes.CDLL:
@@ -205,15 +115,6 @@ def bind_llvm_symbols() -> dict[str, int]:
     for name, addr in addrs.items():
         llvm.add_symbol(name, addr)
     return addrs
-
-
-def link_args() -> list[str]:
-    """``cc`` arguments that link a shared library against the wheel's libembree4.
-
-    The wheel's library has a hashed file name (``libembree4-<hash>.so.4``), so it is named
-    with ``-l:`` and found at run time through an rpath."""
-    path = embree_library_path()
-    return [f"-L{path.parent}", f"-l:{path.name}", f"-Wl,-rpath,{path.parent}"]
 
 
 # --------------------------------------------------------------------------- device
@@ -488,7 +389,7 @@ class EmbreeScene:
         ``geom_id`` (int64, -1 on a miss), ``u``, ``v`` (barycentrics of vertices 1 and 2)
         and ``ng`` (N, 3), Embree's unnormalized geometric normal. ``width`` picks the
         ``rtcIntersect`` packet width."""
-        lay = PacketLayout(_check_width(width))
+        lay = PacketLayout(check_width(width))
         o, d, tmax_a, tmin_a = self._rays(origins, dirs, tmax, tmin)
         n = len(o)
         buf, valid, packets = self._packets(lay, o, d, tmax_a, tmin_a)
@@ -512,7 +413,7 @@ class EmbreeScene:
     def occluded(self, origins: Any, dirs: Any, tmax: Any = np.inf, *, tmin: Any = 0.0,
                  width: int = 16) -> np.ndarray:
         """Whether anything lies on each ray segment ``tmin <= t <= tmax`` (bool array)."""
-        lay = PacketLayout(_check_width(width), with_hit=False)
+        lay = PacketLayout(check_width(width), with_hit=False)
         o, d, tmax_a, tmin_a = self._rays(origins, dirs, tmax, tmin)
         n = len(o)
         buf, valid, packets = self._packets(lay, o, d, tmax_a, tmin_a)
@@ -523,121 +424,7 @@ class EmbreeScene:
         return tfar == -np.inf  # Embree sets tfar to -inf on an occluded ray
 
 
-# --------------------------------------------------------------------------- llvmlite
-
-
-def llvm_ray_type(width: int) -> Any:
-    """The llvmlite type of ``RTCRay`` (width 1) or ``RTCRay{4,8,16}``.
-
-    A literal struct of the 12 ray fields in header order: scalars for width 1, else
-    ``[width x float|i32]`` rows. Allocate it with :data:`alignment` ``PacketLayout(w).align``
-    (see :func:`alloca_packet`)."""
-    import llvmlite.ir as L
-
-    _check_width(width)
-    f32, i32 = L.FloatType(), L.IntType(32)
-
-    def row(field: str) -> Any:
-        base = i32 if field in UINT_FIELDS else f32
-        return base if width == 1 else L.ArrayType(base, width)
-
-    return L.LiteralStructType([row(f) for f in RAY_FIELDS])
-
-
-def llvm_hit_type(width: int) -> Any:
-    """The llvmlite type of ``RTCHit`` or ``RTCHit{4,8,16}`` (see :func:`llvm_rayhit_type`).
-
-    Fields in header order; ``instID`` and ``instPrimID`` are ``[1 x ...]`` arrays (one
-    instance level). The single-ray hit carries 3 trailing words of padding to 48 bytes."""
-    import llvmlite.ir as L
-
-    _check_width(width)
-    f32, i32 = L.FloatType(), L.IntType(32)
-    fields = []
-    for field in HIT_FIELDS:
-        base = i32 if field in UINT_FIELDS else f32
-        t = base if width == 1 else L.ArrayType(base, width)
-        fields.append(L.ArrayType(t, 1) if field in ("instID", "instPrimID") else t)
-    lay = PacketLayout(width)
-    pad = lay.words - lay.ray_words - len(HIT_FIELDS) * width
-    if pad:
-        fields.append(L.ArrayType(i32, pad))
-    return L.LiteralStructType(fields)
-
-
-def llvm_rayhit_type(width: int) -> Any:
-    """The llvmlite type of ``RTCRayHit`` / ``RTCRayHit{4,8,16}``: ``{ray, hit}``.
-
-    Its size is ``PacketLayout(width).nbytes`` (96, 336, 672, 1344 bytes); field
-    ``RAY_FIELDS[j]`` is at GEP indices ``(0, 0, j)``, ``HIT_FIELDS[j]`` at ``(0, 1, j)``,
-    then ``lane`` for packets (and ``0`` before it for the instance-level arrays)."""
-    import llvmlite.ir as L
-
-    return L.LiteralStructType([llvm_ray_type(width), llvm_hit_type(width)])
-
-
-def field_indices(field: str, width: int, lane: int | Any = 0, *,
-                  with_hit: bool = True) -> list[Any]:
-    """GEP indices (i32 constants, or ``lane`` as given) of one lane of ``field``."""
-    import llvmlite.ir as L
-
-    i32 = L.IntType(32)
-
-    def c(k: int) -> Any:
-        return L.Constant(i32, k)
-
-    lane_v = c(lane) if isinstance(lane, int) else lane
-    if field in RAY_FIELDS:
-        path = [c(0), c(0), c(RAY_FIELDS.index(field))] if with_hit else \
-               [c(0), c(RAY_FIELDS.index(field))]
-    elif with_hit and field in HIT_FIELDS:
-        path = [c(0), c(1), c(HIT_FIELDS.index(field))]
-        if field in ("instID", "instPrimID"):
-            path.append(c(0))
-    else:
-        raise KeyError(f"no field {field!r}")
-    return path if width == 1 else path + [lane_v]
-
-
-def alloca_packet(builder: Any, width: int, *, with_hit: bool = True, name: str = "") -> Any:
-    """An ``alloca`` of ``RTCRayHitN`` (or ``RTCRayN``) with Embree's required alignment.
-
-    Returns an opaque ``ptr`` (as the LLVM backend uses throughout): address fields with
-    ``builder.gep(p, field_indices(...), source_etype=llvm_rayhit_type(width))``. Emit it in
-    the entry block, so that a loop reuses one stack slot."""
-    import llvmlite.ir as L
-
-    ty = llvm_rayhit_type(width) if with_hit else llvm_ray_type(width)
-    slot = builder.alloca(ty, name=name)
-    slot.align = PacketLayout(width, with_hit).align
-    # llvmlite types an alloca as a typed pointer, and a bitcast to `ptr` folds away (the two
-    # compare equal); retype the result so that GEPs with source_etype yield opaque pointers
-    slot.type = L.PointerType()
-    return slot
-
-
-def declare_query(module: Any, query: str, width: int) -> Any:
-    """Declare ``rtcIntersect<width>`` or ``rtcOccluded<width>`` in an llvmlite module.
-
-    Width 1: ``void (ptr scene, ptr rayhit, ptr args)``; packets:
-    ``void (ptr valid, ptr scene, ptr rayhit, ptr args)`` where ``valid`` points to
-    ``width`` i32 (-1 = active, 0 = inactive) aligned like the packet. ``args`` may be null."""
-    import llvmlite.ir as L
-
-    if query not in ("Intersect", "Occluded"):
-        raise ValueError(f"query: expected 'Intersect' or 'Occluded', got {query!r}")
-    name = f"rtc{query}{_check_width(width)}"
-    if name in module.globals:
-        return module.globals[name]
-    ptr = L.PointerType()
-    fnty = L.FunctionType(L.VoidType(), [ptr] * (3 if width == 1 else 4))
-    return L.Function(module, fnty, name)
-
-
 __all__ = [
-    "BUILD_QUALITY", "HIT_FIELDS", "QUERY_FUNCTIONS", "RAY_FIELDS", "RTC_INVALID_GEOMETRY_ID",
-    "WIDTHS", "EmbreeDevice", "EmbreeError", "EmbreeScene", "PacketLayout", "alloca_packet",
-    "bind_llvm_symbols", "declare_query", "default_device", "embree_library_path",
-    "field_indices", "link_args", "llvm_hit_type", "llvm_ray_type", "llvm_rayhit_type",
-    "load_embree", "symbol_addresses",
+    "BUILD_QUALITY", "EmbreeDevice", "EmbreeError", "EmbreeScene", "bind_llvm_symbols",
+    "default_device", "load_embree", "symbol_addresses",
 ]

@@ -1,49 +1,25 @@
 """Analytic spheres and disks as Embree 4 user geometry, intersected by native callbacks.
 
-Embree calls a user geometry's intersect and occluded callbacks during traversal, from the
-compiled kernels' ``rtcIntersectN``/``rtcOccludedN``.  Those callbacks are generated here as
-LLVM IR (llvmlite), JIT-compiled once per process (MCJIT) and bound to each geometry by
-address, so no Python runs per ray.  The bounds callback is native too (it only copies a box).
-
-Each geometry owns a block of 24 doubles (its ``geometryUserPtr``); world space throughout:
-
-    sphere  [0:3] center, [3] radius
-    disk    [0:12] rows of to_object (3 x 4), [12:15] the geometric normal (unit, unflipped)
-    both    [16:19] lower corner of the bounding box, [19:22] upper corner
-
-The callbacks follow the ``RTCIntersectFunctionNArguments`` / ``RTCOccludedFunctionNArguments``
-ABI of ``embree4/rtcore_geometry.h`` (64-bit):
-
-    int* valid @0, void* geometryUserPtr @8, uint primID @16, RTCRayQueryContext* context @24,
-    RTCRayHitN* rayhit (or RTCRayN* ray) @32, uint N @40, uint geomID @44
-
-and handle any ``N`` (Embree passes 1 or a packet width): lane ``i`` is active when
-``valid[i] != 0``; field ``k`` of ``RAY_FIELDS``/``HIT_FIELDS`` is the float/uint at index
-``k * N + i`` of the ray (hit rows start after the 12 ray rows).  A hit is reported only for
-``tnear <= t <= tfar``, as Embree requires, by writing ``tfar``, ``Ng``, ``u``, ``v``,
-``primID``, ``geomID`` and ``instID[0]`` (occluded: ``tfar = -inf``).  The arithmetic is in
-double precision, as Mitsuba's sphere intersection on the CPU:
-
-- sphere: Mitsuba's robust form, which moves the origin to the point of the ray closest to
-  the center before solving the quadratic; ``Ng = hit point - center``, ``u = v = 0``;
-- disk: the ray in object space meets z = 0 inside the unit circle; ``u, v`` are the local
-  coordinates x, y of the hit (stdlib/render/geometry.rdsl rebuilds the point from them).
+A :class:`UserShape` (from :func:`sphere` or :func:`disk`) holds the block of doubles that its
+callbacks read (its ``geometryUserPtr``, laid out by :data:`rdsl.core.embree_abi.USER_BLOCK`,
+world space) and registers itself with Embree through ctypes when an
+:class:`~rdsl.runtime.embree.EmbreeScene` is built.  The callbacks themselves (bounds,
+intersect, occluded; native, so no Python runs per ray) are generated and JIT-compiled by the
+backend, ``compiler/backends/llvm_shapes.py``, which hands over their addresses.
 """
 
 from __future__ import annotations
 
 import ctypes
-import threading
 from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 
-from .embree import HIT_FIELDS, RAY_FIELDS, EmbreeDevice, EmbreeError
+from ..core.embree_abi import USER_BLOCK, USER_BLOCK_DOUBLES, USER_KINDS
+from .embree import EmbreeDevice
 
 GEOMETRY_TYPE_USER = 120  # RTC_GEOMETRY_TYPE_USER
-BLOCK_DOUBLES = 24
-KINDS = ("sphere", "disk")
 
 _P = ctypes.c_void_p
 _SIGNATURES: dict[str, tuple[Any, list[Any]]] = {
@@ -55,16 +31,26 @@ _SIGNATURES: dict[str, tuple[Any, list[Any]]] = {
 }
 
 
+def _declare(lib: ctypes.CDLL) -> ctypes.CDLL:
+    for name, (res, args) in _SIGNATURES.items():
+        fn = getattr(lib, name)
+        fn.restype, fn.argtypes = res, args
+    return lib
+
+
 @dataclass
 class UserShape:
     """An analytic shape for :class:`rdsl.runtime.embree.EmbreeScene` (which accepts these
     among its ``(vertices, faces)`` meshes).  Build one with :func:`sphere` or :func:`disk`."""
 
-    kind: str
-    block: np.ndarray = field(repr=False)  # float64[BLOCK_DOUBLES], the callbacks' data
+    kind: str  # one of USER_KINDS
+    block: np.ndarray = field(repr=False)  # float64[USER_BLOCK_DOUBLES], the callbacks' data
 
     def new_geometry(self, device: EmbreeDevice, what: str) -> int:
         """A committed ``RTCGeometry`` (the caller attaches and releases it)."""
+        # only now: building a scene of meshes never loads the code generator
+        from ..compiler.backends.llvm_shapes import callback_addresses
+
         addrs = callback_addresses()
         lib = _declare(device.lib)
         geom = lib.rtcNewGeometry(device.handle, GEOMETRY_TYPE_USER)
@@ -93,16 +79,24 @@ def _padded(lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return lo - pad, hi + pad
 
 
+def _block(kind: str, **parts: Any) -> UserShape:
+    """The shape whose block holds ``parts`` where ``USER_BLOCK`` places them, zeros elsewhere."""
+    assert kind in USER_KINDS, kind
+    block = np.zeros(USER_BLOCK_DOUBLES)
+    for name, value in parts.items():
+        first, size = USER_BLOCK[name]
+        block[first:first + size] = value
+    return UserShape(kind, block)
+
+
 def sphere(center: Any, radius: float) -> UserShape:
     """The sphere of ``radius`` around ``center`` (world space)."""
     c = _finite("center", center, (3,))
     r = float(radius)
     if not (np.isfinite(r) and r > 0):
         raise ValueError(f"radius: expected a positive number, got {radius!r}")
-    block = np.zeros(BLOCK_DOUBLES)
-    block[0:3], block[3] = c, r
-    block[16:19], block[19:22] = _padded(c - r, c + r)
-    return UserShape("sphere", block)
+    lower, upper = _padded(c - r, c + r)
+    return _block("sphere", center=c, radius=r, lower=lower, upper=upper)
 
 
 def disk(to_world: Any) -> UserShape:
@@ -113,227 +107,11 @@ def disk(to_world: Any) -> UserShape:
         raise ValueError("to_world: the transform is singular")
     inv = np.linalg.inv(m)
     n = np.linalg.inv(lin).T @ np.array([0.0, 0.0, 1.0])
-    block = np.zeros(BLOCK_DOUBLES)
-    block[0:12] = inv[:3, :4].reshape(-1)
-    block[12:15] = n / np.linalg.norm(n)
     # the disk's extent along each world axis: |row of the linear part restricted to x, y|
     half = np.sqrt(lin[:, 0] ** 2 + lin[:, 1] ** 2)
-    block[16:19], block[19:22] = _padded(m[:3, 3] - half, m[:3, 3] + half)
-    return UserShape("disk", block)
+    lower, upper = _padded(m[:3, 3] - half, m[:3, 3] + half)
+    return _block("disk", to_object=inv[:3, :4].reshape(-1), normal=n / np.linalg.norm(n),
+                  lower=lower, upper=upper)
 
 
-# --------------------------------------------------------------------------- callbacks
-
-_engine: Any = None
-_addresses: dict[str, int] = {}
-_lock = threading.Lock()
-
-
-def _declare(lib: ctypes.CDLL) -> ctypes.CDLL:
-    for name, (res, args) in _SIGNATURES.items():
-        fn = getattr(lib, name)
-        fn.restype, fn.argtypes = res, args
-    return lib
-
-
-def callback_addresses() -> dict[str, int]:
-    """Addresses of the native callbacks (JIT-compiled on first use, once per process):
-    ``bounds``, ``sphere_intersect``, ``sphere_occluded``, ``disk_intersect``,
-    ``disk_occluded``."""
-    global _engine
-    with _lock:
-        if not _addresses:
-            import llvmlite.binding as llvm
-
-            llvm.initialize_native_target()
-            llvm.initialize_native_asmprinter()
-            mod = llvm.parse_assembly(str(build_module()))
-            mod.verify()
-            target = llvm.Target.from_default_triple()
-            tm = target.create_target_machine(cpu=llvm.get_host_cpu_name(), opt=2,
-                                              reloc="pic")
-            engine = llvm.create_mcjit_compiler(mod, tm)
-            engine.finalize_object()
-            names = ["bounds"] + [f"{k}_{q}" for k in KINDS for q in ("intersect", "occluded")]
-            addrs = {n: engine.get_function_address(f"rdsl_user_{n}") for n in names}
-            if not all(addrs.values()):
-                raise EmbreeError("the JIT did not produce the user-geometry callbacks")
-            _engine = engine  # keeps the code alive for the process
-            _addresses.update(addrs)
-        return dict(_addresses)
-
-
-def build_module() -> Any:
-    """The llvmlite module of the callbacks (``rdsl_user_<name>``, each ``void (ptr)``)."""
-    import llvmlite.ir as L
-
-    mod = L.Module(name="rdsl_embree_user")
-    _bounds_function(mod)
-    for kind, test in (("sphere", _sphere_test), ("disk", _disk_test)):
-        for query in ("intersect", "occluded"):
-            _query_function(mod, kind, query, test)
-    return mod
-
-
-class _IR:
-    """Shorthands for the IR builders below."""
-
-    def __init__(self, b: Any) -> None:
-        import llvmlite.ir as L
-
-        self.L, self.b = L, b
-        self.f32, self.f64, self.i32, self.i64 = L.FloatType(), L.DoubleType(), \
-            L.IntType(32), L.IntType(64)
-        self.i8, self.ptr = L.IntType(8), L.PointerType()
-
-    def c(self, ty: Any, v: Any) -> Any:
-        return self.L.Constant(ty, v)
-
-    def at(self, base: Any, ty: Any, index: Any) -> Any:
-        """Pointer to element ``index`` (an int or an i64 value) of an array of ``ty``."""
-        idx = self.c(self.i64, index) if isinstance(index, int) else index
-        return self.b.gep(base, [idx], source_etype=ty)
-
-    def load(self, base: Any, ty: Any, index: Any) -> Any:
-        return self.b.load(self.at(base, ty, index), typ=ty)
-
-    def byte(self, base: Any, ty: Any, offset: int) -> Any:
-        """The ``ty`` at byte ``offset`` of a struct."""
-        return self.b.load(self.at(base, self.i8, offset), typ=ty)
-
-    def vec(self, base: Any, first: int) -> list[Any]:
-        return [self.load(base, self.f64, first + k) for k in range(3)]
-
-    def dot(self, a: list[Any], c: list[Any]) -> Any:
-        b = self.b
-        return b.fadd(b.fadd(b.fmul(a[0], c[0]), b.fmul(a[1], c[1])), b.fmul(a[2], c[2]))
-
-
-def _bounds_function(mod: Any) -> None:
-    """RTCBoundsFunctionArguments: geometryUserPtr @0, primID @8, timeStep @12, bounds_o @16;
-    RTCBounds: lower_x, lower_y, lower_z, pad, upper_x, upper_y, upper_z, pad (floats)."""
-    import llvmlite.ir as L
-
-    fn = L.Function(mod, L.FunctionType(L.VoidType(), [L.PointerType()]), "rdsl_user_bounds")
-    b = L.IRBuilder(fn.append_basic_block("entry"))
-    x = _IR(b)
-    args = fn.args[0]
-    user, out = x.byte(args, x.ptr, 0), x.byte(args, x.ptr, 16)
-    for k, slot in enumerate((0, 1, 2, 4, 5, 6)):
-        v = b.fptrunc(x.load(user, x.f64, 16 + k), x.f32)
-        b.store(v, x.at(out, x.f32, slot))
-    b.ret_void()
-
-
-def _sphere_test(x: _IR, user: Any, o: list[Any], d: list[Any], tnear: Any, tfar: Any
-                 ) -> tuple[Any, Any, list[Any], Any, Any]:
-    """(hit, t, Ng, u, v) of the ray against the sphere, in double precision."""
-    b = x.b
-    c, r = x.vec(user, 0), x.load(user, x.f64, 3)
-    sqrt = x.b.module.declare_intrinsic("llvm.sqrt", [x.f64])
-    l_ = [b.fsub(o[k], c[k]) for k in range(3)]
-    dd = x.dot(d, d)
-    # the point of the ray closest to the center, as the new origin (Mitsuba's robust form)
-    tp = b.fdiv(b.fneg(x.dot(l_, d)), dd)
-    q = [b.fadd(l_[k], b.fmul(d[k], tp)) for k in range(3)]
-    bb = b.fmul(x.c(x.f64, 2.0), x.dot(q, d))
-    cc = b.fsub(x.dot(q, q), b.fmul(r, r))
-    disc = b.fsub(b.fmul(bb, bb), b.fmul(b.fmul(x.c(x.f64, 4.0), dd), cc))
-    root = b.call(sqrt, [disc])  # NaN when disc < 0: every comparison below fails
-    inv2a = b.fdiv(x.c(x.f64, 0.5), dd)
-    near = b.fadd(b.fmul(b.fsub(b.fneg(bb), root), inv2a), tp)
-    far = b.fadd(b.fmul(b.fsub(root, bb), inv2a), tp)
-    t = b.select(b.fcmp_ordered(">=", near, tnear), near, far)
-    hit = b.and_(b.fcmp_ordered(">=", t, tnear), b.fcmp_ordered("<=", t, tfar))
-    ng = [b.fsub(b.fadd(o[k], b.fmul(d[k], t)), c[k]) for k in range(3)]
-    zero = x.c(x.f64, 0.0)
-    return hit, t, ng, zero, zero
-
-
-def _disk_test(x: _IR, user: Any, o: list[Any], d: list[Any], tnear: Any, tfar: Any
-               ) -> tuple[Any, Any, list[Any], Any, Any]:
-    """(hit, t, Ng, u, v) of the ray against the disk; u, v = the local x, y of the hit."""
-    b = x.b
-    rows = [[x.load(user, x.f64, 4 * i + j) for j in range(4)] for i in range(3)]
-    lo = [b.fadd(x.dot(rows[i][:3], o), rows[i][3]) for i in range(3)]
-    ld = [x.dot(rows[i][:3], d) for i in range(3)]
-    t = b.fdiv(b.fneg(lo[2]), ld[2])
-    px = b.fadd(lo[0], b.fmul(ld[0], t))
-    py = b.fadd(lo[1], b.fmul(ld[1], t))
-    r2 = b.fadd(b.fmul(px, px), b.fmul(py, py))
-    hit = b.and_(b.fcmp_ordered("<=", r2, x.c(x.f64, 1.0)),
-                 b.and_(b.fcmp_ordered(">=", t, tnear), b.fcmp_ordered("<=", t, tfar)))
-    return hit, t, x.vec(user, 12), px, py
-
-
-def _query_function(mod: Any, kind: str, query: str, test: Any) -> None:
-    import llvmlite.ir as L
-
-    fn = L.Function(mod, L.FunctionType(L.VoidType(), [L.PointerType()]),
-                    f"rdsl_user_{kind}_{query}")
-    entry, head, body, lane, found, nxt, done = (
-        fn.append_basic_block(s) for s in ("entry", "head", "body", "lane", "found", "next",
-                                           "done"))
-    b = L.IRBuilder(entry)
-    x = _IR(b)
-    args = fn.args[0]
-    valid, user = x.byte(args, x.ptr, 0), x.byte(args, x.ptr, 8)
-    prim, context = x.byte(args, x.i32, 16), x.byte(args, x.ptr, 24)
-    rays, n32 = x.byte(args, x.ptr, 32), x.byte(args, x.i32, 40)
-    geom = x.byte(args, x.i32, 44)
-    n = b.zext(n32, x.i64)
-    b.branch(head)
-
-    b.position_at_end(head)
-    i = b.phi(x.i64, name="i")
-    i.add_incoming(x.c(x.i64, 0), entry)
-    b.cbranch(b.icmp_unsigned("<", i, n), body, done)
-
-    b.position_at_end(body)
-    active = b.icmp_signed("!=", x.load(valid, x.i32, i), x.c(x.i32, 0))
-    b.cbranch(active, lane, nxt)
-
-    b.position_at_end(lane)
-
-    def slot(row: int, ty: Any) -> Any:  # lane i of row `row` (ray rows, then hit rows)
-        return x.at(rays, ty, b.add(b.mul(x.c(x.i64, row), n), i))
-
-    def ray(name: str) -> Any:
-        return b.fpext(b.load(slot(RAY_FIELDS.index(name), x.f32), typ=x.f32), x.f64)
-
-    o = [ray(f"org_{a}") for a in "xyz"]
-    d = [ray(f"dir_{a}") for a in "xyz"]
-    tnear, tfar = ray("tnear"), ray("tfar")
-    hit, t, ng, u, v = test(x, user, o, d, tnear, tfar)
-    b.cbranch(hit, found, nxt)
-
-    b.position_at_end(found)
-    tfar_slot = slot(RAY_FIELDS.index("tfar"), x.f32)
-    if query == "occluded":
-        b.store(x.c(x.f32, float("-inf")), tfar_slot)
-    else:
-        b.store(b.fptrunc(t, x.f32), tfar_slot)
-
-        def put(name: str, value: Any, ty: Any) -> None:
-            b.store(value, slot(len(RAY_FIELDS) + HIT_FIELDS.index(name), ty))
-
-        for a, comp in zip("xyz", ng):
-            put(f"Ng_{a}", b.fptrunc(comp, x.f32), x.f32)
-        put("u", b.fptrunc(u, x.f32), x.f32)
-        put("v", b.fptrunc(v, x.f32), x.f32)
-        put("primID", prim, x.i32)
-        put("geomID", geom, x.i32)
-        put("instID", x.load(context, x.i32, 0), x.i32)  # context->instID[0]
-        put("instPrimID", x.c(x.i32, -1), x.i32)
-    b.branch(nxt)
-
-    b.position_at_end(nxt)
-    i.add_incoming(b.add(i, x.c(x.i64, 1)), nxt)
-    b.branch(head)
-
-    b.position_at_end(done)
-    b.ret_void()
-
-
-__all__ = ["BLOCK_DOUBLES", "KINDS", "UserShape", "build_module", "callback_addresses", "disk",
-           "sphere"]
+__all__ = ["UserShape", "disk", "sphere"]

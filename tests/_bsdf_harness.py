@@ -35,9 +35,10 @@ from typing import Any
 
 import numpy as np
 import rdsl
-from rdsl.compiler.passes.specialize import Instance, SceneSpec, SpectrumValue, parameter_slots
+from rdsl.compiler.passes.specialize import parameter_slots
+from rdsl.core import spectral as S
 from rdsl.core.color import MODELS, VARIANTS  # noqa: F401 (VARIANTS: for the tests)
-from rdsl.runtime import spectral as S
+from rdsl.core.scene_spec import Instance, SceneSpec, SpectrumValue
 from rdsl.runtime.render.bsdfs import BSDF_PLUGINS, bsdf_instance, split_leaves
 from rdsl.runtime.scene.loader import load_scene_description
 

@@ -16,7 +16,7 @@ import pytest
 pytest.importorskip("rdsl.runtime.embree")
 
 import rdsl
-from rdsl.compiler.passes.specialize import SceneSpec
+from rdsl.core.scene_spec import SceneSpec
 from rdsl.runtime.render.bsdfs import split_leaves
 from rdsl.runtime.render.renderer import load_scene
 from test_bsdf_plugins import chi2_directions, pdf_fn, rng, sample, surface, tile, wi_at

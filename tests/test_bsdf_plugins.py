@@ -37,7 +37,7 @@ import pytest
 import rdsl
 from _bsdf_harness import VARIANTS, Harness, colour_at, ior_table
 from _chi2 import beckmann_g1_exact, beckmann_g1_fit, chi2_directions
-from rdsl.compiler.passes.specialize import SpectrumValue
+from rdsl.core.scene_spec import SpectrumValue
 
 BSDF_DIR = Path(__file__).resolve().parents[1] / "stdlib" / "bsdf"
 PLUGINS = ["diffuse", "roughconductor", "conductor", "dielectric", "thindielectric",
@@ -222,7 +222,7 @@ def test_chi2_plastic(mods, variant):
 def test_colour_in_every_variant(mods, variant):
     """A colour is the variant's own: diffuse's sample weight is the reflectance in RGB, its
     luminance in mono, the Jakob & Hanika spectrum at each row's wavelengths (numpy's model,
-    rdsl.runtime.spectral) in spectral variants; the intensity entry in polarized ones."""
+    rdsl.core.spectral) in spectral variants; the intensity entry in polarized ones."""
     mod, n, rgb = mods("diffuse", variant), 2000, (0.8, 0.5, 0.2)
     _, bs = sample(mod, "diffuse", wi_at(0.7), n, rng("colour", variant), reflectance=rgb)
     want = colour_at(variant, rgb, mod.wavelengths(n))

@@ -18,7 +18,7 @@ GOOD = "fn lerp(a: Float, b: Float, t: Float) -> Float { return a + (b - a) * t;
 
 def rdsl(*args: str, cwd: Path | None = None) -> subprocess.CompletedProcess:
     env = dict(os.environ)
-    return subprocess.run([sys.executable, "-m", "rdsl.compiler.cli", *args], cwd=cwd,
+    return subprocess.run([sys.executable, "-m", "rdsl.cli", *args], cwd=cwd,
                           capture_output=True, text=True, env=env, timeout=300)
 
 

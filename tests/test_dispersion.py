@@ -29,7 +29,7 @@ import pytest
 from _bsdf_harness import VARIANTS, Harness
 from _chi2 import chi2_directions
 from rdsl.compiler.diagnostics import CompileError
-from rdsl.runtime import spectral as S
+from rdsl.core import spectral as S
 from test_bsdf_plugins import fresnel_np, pdf_fn, rng, sample, surface, tile, wi_at
 
 f32 = np.float32

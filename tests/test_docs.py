@@ -21,8 +21,8 @@ from pathlib import Path
 import pytest
 from rdsl.compiler.build import Build
 from rdsl.compiler.driver import frontend, pipeline
-from rdsl.compiler.passes.specialize import SceneSpec
 from rdsl.compiler.printer import print_function
+from rdsl.core.scene_spec import SceneSpec
 
 ROOT = Path(__file__).resolve().parents[1]
 DOCS = [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md"))]

@@ -10,6 +10,8 @@ import subprocess
 
 import numpy as np
 import pytest
+from rdsl.compiler.backends import embree_llvm as LL
+from rdsl.core import embree_abi as ABI
 from rdsl.runtime import embree as E
 
 try:
@@ -181,12 +183,12 @@ def test_empty_batch(soup):
 # --------------------------------------------------------------------------- layout
 
 
-@pytest.mark.parametrize("width", E.WIDTHS)
+@pytest.mark.parametrize("width", ABI.WIDTHS)
 def test_layout_matches_what_embree_writes(soup, width):
     """Fill a packet and a guard zone with sentinels: Embree must write exactly the hit
     fields our layout names (instID and instPrimID included) and nothing past the end."""
     scene, verts, faces = soup
-    lay = E.PacketLayout(width)
+    lay = ABI.PacketLayout(width)
     sentinel = 0x5A5A5A5A
     words = E._aligned_words(lay.words + 64, lay.align)
     words[:] = sentinel
@@ -200,7 +202,7 @@ def test_layout_matches_what_embree_writes(soup, width):
         f[lay.offset("tfar") + lane] = np.inf
         words[lay.offset("mask") + lane] = 0xFFFFFFFF
         words[lay.offset("id") + lane], words[lay.offset("flags") + lane] = lane, 0
-        words[lay.offset("geomID") + lane] = E.RTC_INVALID_GEOMETRY_ID
+        words[lay.offset("geomID") + lane] = ABI.RTC_INVALID_GEOMETRY_ID
     valid = E._aligned_words(max(width, 4), lay.align).view(np.int32)
     valid[:] = -1
     fn = getattr(scene.lib, f"rtcIntersect{width}")
@@ -211,28 +213,28 @@ def test_layout_matches_what_embree_writes(soup, width):
     scene.device.check("rtcIntersect")
     for lane in range(width):
         assert words[lay.offset("geomID") + lane] == 0
-        assert words[lay.offset("instID") + lane] == E.RTC_INVALID_GEOMETRY_ID
-        assert words[lay.offset("instPrimID") + lane] == E.RTC_INVALID_GEOMETRY_ID
+        assert words[lay.offset("instID") + lane] == ABI.RTC_INVALID_GEOMETRY_ID
+        assert words[lay.offset("instPrimID") + lane] == ABI.RTC_INVALID_GEOMETRY_ID
         assert np.isfinite(f[lay.offset("tfar") + lane])
     end = lay.offset("instPrimID") + width
     assert np.all(words[end:] == sentinel), "Embree wrote past the fields we know of"
 
 
-@pytest.mark.parametrize("width", E.WIDTHS)
+@pytest.mark.parametrize("width", ABI.WIDTHS)
 def test_llvm_types_have_embree_layout(width):
     import llvmlite.binding as llvm
 
     llvm.initialize_native_target()
     td = llvm.create_target_data("e-m:e-p270:32:32-p271:32:32-p272:64:64-i64:64-i128:128-"
                                  "f80:128-n8:16:32:64-S128")
-    lay, ty = E.PacketLayout(width), E.llvm_rayhit_type(width)
+    lay, ty = ABI.PacketLayout(width), LL.llvm_rayhit_type(width)
     assert ty.get_abi_size(td) == lay.nbytes == {1: 96, 4: 336, 8: 672, 16: 1344}[width]
-    assert E.llvm_ray_type(width).get_abi_size(td) == E.PacketLayout(width, False).nbytes
+    assert LL.llvm_ray_type(width).get_abi_size(td) == ABI.PacketLayout(width, False).nbytes
     ray, hit = ty.elements
     assert ty.get_element_offset(td, 1) == 4 * lay.ray_words
-    for j, name in enumerate(E.RAY_FIELDS):
+    for j, name in enumerate(ABI.RAY_FIELDS):
         assert ray.get_element_offset(td, j) == 4 * lay.offset(name)
-    for j, name in enumerate(E.HIT_FIELDS):
+    for j, name in enumerate(ABI.HIT_FIELDS):
         assert 4 * lay.ray_words + hit.get_element_offset(td, j) == 4 * lay.offset(name)
 
 
@@ -249,18 +251,18 @@ def build_tracer(query: str, width: int):
 
     f32, i32, ptr = L.FloatType(), L.IntType(32), L.PointerType()
     mod = L.Module(name=f"embree_{query}{width}")
-    rtc = E.declare_query(mod, query, width)
+    rtc = LL.declare_query(mod, query, width)
     fn = L.Function(mod, L.FunctionType(L.VoidType(), [ptr] * 5 + [i32]), "trace")
     scene, o, d, tout, pout, n = fn.args
     entry, head, body, done = (fn.append_basic_block(s) for s in ("entry", "head", "body",
                                                                      "done"))
     b = L.IRBuilder(entry)
     with_hit = query == "Intersect"
-    pkt_ty = E.llvm_rayhit_type(width) if with_hit else E.llvm_ray_type(width)
-    pkt = E.alloca_packet(b, width, with_hit=with_hit, name="packet")
+    pkt_ty = LL.llvm_rayhit_type(width) if with_hit else LL.llvm_ray_type(width)
+    pkt = LL.alloca_packet(b, width, with_hit=with_hit, name="packet")
     valid_ty = L.ArrayType(i32, width)
     valid = b.alloca(valid_ty, name="valid")
-    valid.align = E.PacketLayout(width).align
+    valid.align = ABI.PacketLayout(width).align
     valid.type = ptr  # as alloca_packet does: an opaque pointer
     b.branch(head)
     b.position_at_end(head)
@@ -270,7 +272,7 @@ def build_tracer(query: str, width: int):
     b.position_at_end(body)
 
     def field(name: str, lane: int) -> L.Value:
-        return b.gep(pkt, E.field_indices(name, width, lane, with_hit=with_hit),
+        return b.gep(pkt, LL.field_indices(name, width, lane, with_hit=with_hit),
                      inbounds=True, source_etype=pkt_ty)
 
     last = b.sub(n, L.Constant(i32, 1))
@@ -352,10 +354,10 @@ def jit():
     import llvmlite.binding as llvm
 
     addrs = E.bind_llvm_symbols()
-    assert set(addrs) == set(E.QUERY_FUNCTIONS) and all(addrs.values())
+    assert set(addrs) == set(ABI.QUERY_FUNCTIONS) and all(addrs.values())
     engines, fns = [], {}
     for query in ("Intersect", "Occluded"):
-        for width in E.WIDTHS:
+        for width in ABI.WIDTHS:
             ee = llvm.create_mcjit_compiler(_parsed(query, width), _target_machine())
             ee.finalize_object()
             engines.append(ee)
@@ -364,7 +366,7 @@ def jit():
     del engines
 
 
-@pytest.mark.parametrize("width", E.WIDTHS)
+@pytest.mark.parametrize("width", ABI.WIDTHS)
 def test_jit_calls_embree(soup, jit, width):
     scene, _, _ = soup
     o, d, _ = random_rays(np.random.default_rng(5), 777)
@@ -383,7 +385,7 @@ def test_shared_library_links_against_embree(soup, tmp_path):
     obj = tmp_path / "trace.o"
     obj.write_bytes(tm.emit_object(_parsed("Intersect", 8)))
     so = tmp_path / "trace.so"
-    subprocess.run(["cc", "-shared", "-o", str(so), str(obj), *E.link_args()], check=True,
+    subprocess.run(["cc", "-shared", "-o", str(so), str(obj), *ABI.link_args()], check=True,
                    capture_output=True)
     if shutil.which("readelf"):
         dynamic = subprocess.run(["readelf", "-d", str(so)], check=True, capture_output=True,
@@ -454,6 +456,6 @@ def test_embree_errors_become_exceptions():
 
 
 def test_library_comes_from_the_wheel():
-    path = E.embree_library_path()
+    path = ABI.embree_library_path()
     assert "embreex" in str(path) and path.name.startswith("libembree4")
     assert E.default_device().version // 10000 == 4

@@ -26,7 +26,7 @@ import rdsl
 
 pytest.importorskip("rdsl.runtime.embree")
 
-from rdsl.compiler.passes.specialize import SceneSpec  # noqa: E402
+from rdsl.core.scene_spec import SceneSpec  # noqa: E402
 from rdsl.runtime.render.renderer import load_scene  # noqa: E402
 
 SRC = """

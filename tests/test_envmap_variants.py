@@ -2,7 +2,7 @@
 (linear sRGB in mono and rgb, Jakob & Hanika coefficients and a scale in the spectral ones,
 as Mitsuba 3's spectral envmap), evaluated by one rdsl source.
 
-Truths: the numpy model of Mitsuba's spectral envmap lookup (rdsl.runtime.spectral); a
+Truths: the numpy model of Mitsuba's spectral envmap lookup (rdsl.core.spectral); a
 constant-colour map equals a `constant` emitter of that colour, and lights a diffuse plane
 with the analytic RHO * L (in spectral variants L is the film's sRGB of the upsampled
 radiance, integrated over wavelengths); a varying map renders the same in rgb and spectral.
@@ -19,8 +19,8 @@ import pytest
 pytest.importorskip("rdsl.runtime.embree")
 
 import rdsl
+from rdsl.core import spectral as S
 from rdsl.core.color import RGB, SPECTRAL
-from rdsl.runtime import spectral as S
 from rdsl.runtime.render.emitters import envmap_tables
 from rdsl.runtime.render.renderer import load_scene
 from test_emitters import RHO, _bilinear, _envmap, scene_xml

@@ -13,7 +13,7 @@ import pytest
 
 pytest.importorskip("rdsl.runtime.embree")
 
-from rdsl.compiler.cli import main
+from rdsl.cli import main
 from rdsl.runtime.render.renderer import load_scene
 from test_scene_bsdfs import BSDFS, OBLIQUE, scene_xml
 
@@ -176,7 +176,7 @@ def test_spectral_tabulated_spectra_are_read_from_prm(tmp_path, monkeypatch):
     from rdsl.compiler.driver import compile_kernels
     from rdsl.compiler.ir import Op
     from rdsl.compiler.passes.specialize import parameter_slots
-    from rdsl.runtime import spectral
+    from rdsl.core import spectral
 
     monkeypatch.setenv("RDSL_CACHE_DIR", str(tmp_path / "cache"))
     path = tmp_path / "metals.xml"

@@ -14,8 +14,9 @@ from __future__ import annotations
 import pytest
 from _golden import GOLDEN, check_golden
 from rdsl.compiler.driver import frontend, run_passes
-from rdsl.compiler.passes.specialize import Instance, SceneSpec, Specialize
+from rdsl.compiler.passes.specialize import Specialize
 from rdsl.compiler.printer import print_function
+from rdsl.core.scene_spec import Instance, SceneSpec
 
 SRC = """\
 import render.scene;

@@ -152,7 +152,7 @@ def test_cli_writes_aov_channels(tmp_path):
     from rdsl.runtime.render.image import read_exr_channels
 
     out = tmp_path / "plane.exr"
-    r = subprocess.run([sys.executable, "-m", "rdsl.compiler.cli", "render",
+    r = subprocess.run([sys.executable, "-m", "rdsl.cli", "render",
                         str(_plane(tmp_path)), "--spp", "1", "-o", str(out), "--quiet"],
                        check=False, capture_output=True, text=True, timeout=600)
     assert r.returncode == 0, r.stderr

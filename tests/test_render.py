@@ -62,7 +62,7 @@ def test_specialization_dispatches_only_scene_instances(cbox):
 
 
 def run(*args, cwd=None):
-    return subprocess.run([sys.executable, "-m", "rdsl.compiler.cli", *args], cwd=cwd,
+    return subprocess.run([sys.executable, "-m", "rdsl.cli", *args], cwd=cwd,
                           capture_output=True, text=True, timeout=600)
 
 

@@ -18,7 +18,7 @@ import numpy as np
 import pytest
 import rdsl
 from rdsl.compiler.diagnostics import CompileError
-from rdsl.compiler.passes.specialize import Instance, SceneSpec
+from rdsl.core.scene_spec import Instance, SceneSpec
 from rdsl.runtime.render.bsdfs import mixture_params
 from rdsl.runtime.render.renderer import load_scene
 from test_bsdf_plugins import chi2_directions, pdf_fn, rng, sample, surface, tile, wi_at

@@ -21,6 +21,7 @@ import pytest
 import rdsl
 from rdsl.compiler.diagnostics import CompileError
 from rdsl.compiler.targets import get_target, host_supports
+from rdsl.core.embree_abi import WIDTHS
 
 embree = pytest.importorskip("rdsl.runtime.embree")
 try:
@@ -147,7 +148,7 @@ def test_compiled_trace_matches_analytic_intersection_on_every_target(hit_module
         assert np.array_equal(blocked[clear], hits[clear]), target
 
 
-@pytest.mark.parametrize("width", embree.WIDTHS)
+@pytest.mark.parametrize("width", WIDTHS)
 def test_packet_widths_and_tmin(width):
     scene = user_scene()
     o, d, _ = random_rays(500, 3)

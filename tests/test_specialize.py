@@ -11,8 +11,9 @@ from rdsl.compiler.build import Build
 from rdsl.compiler.driver import frontend, run_passes
 from rdsl.compiler.ir import Op
 from rdsl.compiler.passes.inline import Inline
-from rdsl.compiler.passes.specialize import Instance, SceneSpec, Specialize
+from rdsl.compiler.passes.specialize import Specialize
 from rdsl.compiler.sources import STDLIB
+from rdsl.core.scene_spec import Instance, SceneSpec
 
 SRC = """
 import render.scene;

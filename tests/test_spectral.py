@@ -1,7 +1,7 @@
 """The spectral variant: one stdlib source lifted to four wavelengths per sample.
 
 Kernels are checked against the numpy model of Mitsuba 3's spectral pipeline in
-``rdsl.runtime.spectral`` (itself cross-checked against Mitsuba in test_spectral_data.py):
+``rdsl.core.spectral`` (itself cross-checked against Mitsuba in test_spectral_data.py):
 wavelength sampling, Jakob & Hanika upsampling of reflectances, D65 illuminants, tabulated
 spectra and the film's CIE integration.  The Cornell box is compared with Mitsuba 3's
 ``llvm_ad_spectral`` reference image.
@@ -19,8 +19,8 @@ from rdsl.compiler.build import Build
 from rdsl.compiler.diagnostics import CompileError
 from rdsl.compiler.driver import frontend, pipeline, run_passes
 from rdsl.compiler.ir import Op, SpectrumType, VecType
+from rdsl.core import spectral as S
 from rdsl.core.color import SPECTRAL
-from rdsl.runtime import spectral as S
 
 N = 4096
 U = ((np.arange(N) + 0.5) / N).astype(np.float32)
@@ -134,12 +134,8 @@ def test_tabulated_spectrum_is_exact(name, target, specialize):
     `irregular` spectrum: at the knots, either side of them, at 360 and 830 nm; 0 outside the
     knots and outside 360..830 nm.  Specialized (cells fitted to the knots) and generic
     (fixed 1 nm cells read from PRM) builds alike."""
-    from rdsl.compiler.passes.specialize import (
-        Instance,
-        SceneSpec,
-        SpectrumValue,
-        parameter_slots,
-    )
+    from rdsl.compiler.passes.specialize import parameter_slots
+    from rdsl.core.scene_spec import Instance, SceneSpec, SpectrumValue
 
     wl, vals = map(np.asarray, TABULATED[name])
     scene = SceneSpec(emitters=[Instance("area", {"radiance": SpectrumValue(
@@ -176,7 +172,7 @@ def test_lift_gives_concrete_types():
 
 
 def test_cli_prints_lifted_ir(tmp_path, capsys):
-    from rdsl.compiler.cli import main
+    from rdsl.cli import main
 
     src = tmp_path / "k.rdsl"
     src.write_text(KERNEL)
@@ -258,7 +254,7 @@ def test_spectral_cbox_matches_mitsuba():
 def test_float_and_grey_parameters_are_flat_spectra():
     """`<float name="k" value="3.9"/>` is Mitsuba's uniform spectrum 3.9, not a reflectance
     fit (which would clamp it to 1); an emitter's grey stays a D65-shaped light."""
-    from rdsl.compiler.passes.specialize import SpectrumValue
+    from rdsl.core.scene_spec import SpectrumValue
     from rdsl.runtime.render.colors import spectrum_value
     from rdsl.runtime.scene.spectra import Color
 

@@ -1,4 +1,4 @@
-"""Spectral data and the host spectral math (runtime/spectral.py, tools/rgb2spec_opt.py).
+"""Spectral data and the host spectral math (core/spectral.py, tools/rgb2spec_opt.py).
 
 Checked against independent truth: known colorimetric constants, closed-form integrals of the
 wavelength density, the upsampling round trip, a fresh optimizer run, and, where the
@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from rdsl.runtime import spectral as sp
+from rdsl.core import spectral as sp
 from rdsl.tools import rgb2spec_opt as opt
 
 GRID = sp.LAMBDA_MIN + 5.0 * np.arange(sp.CIE_SAMPLES)

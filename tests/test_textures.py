@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 
 import rdsl
-from rdsl.compiler.passes.specialize import Instance, SceneSpec, TextureRef
 from rdsl.compiler.sources import STDLIB
+from rdsl.core.scene_spec import Instance, SceneSpec, TextureRef
 from rdsl.runtime.render.textures import BITMAP_WRAPS, load_bitmap, srgb_to_linear
 
 WRAPS = list(BITMAP_WRAPS)

@@ -20,7 +20,7 @@ import re
 import pytest
 from rdsl.compiler.build import Build
 from rdsl.compiler.driver import pipeline
-from rdsl.compiler.passes.specialize import SceneSpec
+from rdsl.core.scene_spec import SceneSpec
 from rdsl.tools.gen_walkthrough import (
     WALKTHROUGH,
     Command,

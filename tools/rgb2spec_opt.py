@@ -13,7 +13,7 @@ difference (relative to the D65 white) by Gauss-Newton, as the reference ``rgb2s
   (three per 5 nm step), D65 normalised so that white has Y = 1.
 * The fit runs in the normalised wavelength ``t = (l - 360) / 470``, which keeps the 3x3
   Newton systems well conditioned; the stored coefficients are re-expanded for ``l`` in nm,
-  the convention of Mitsuba's ``srgb.coeff`` and of :func:`rdsl.runtime.spectral.eval_coeffs`.
+  the convention of Mitsuba's ``srgb.coeff`` and of :func:`rdsl.core.spectral.eval_coeffs`.
 * Table layout (rgb2spec's): ``data[m, k, j, i]`` holds the cell whose largest component ``m``
   is ``scale[k] = smoothstep(smoothstep(k / (res - 1)))`` and whose components ``(m + 1) % 3``
   and ``(m + 2) % 3`` are ``i / (res - 1)`` and ``j / (res - 1)`` times that.
@@ -41,7 +41,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..runtime import spectral
+from ..core import spectral
 
 SUBSTEPS = 3          # quadrature points per 5 nm interval (Simpson 3/8 needs a multiple of 3)
 MAX_ITERATIONS = 100

@@ -11,6 +11,7 @@ import tempfile
 from pathlib import Path
 from typing import Any
 
+from ...core.embree_abi import link_args
 from .. import ir
 from ..diagnostics import CompileError
 from ..targets import Target, get_target
@@ -163,8 +164,6 @@ def build_library(module: ir.Module, target: Target | str, out_dir: str | os.Pat
     obj = emit_object(module, t)
     extra: list[str] = []
     if uses_embree(module):
-        from ...runtime.embree import link_args
-
         extra = link_args()
     try:
         link_shared(obj, paths["so"], extra)

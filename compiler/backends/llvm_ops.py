@@ -7,7 +7,6 @@ contraction, integer division by zero guarded, saturating float-to-int casts.
 from __future__ import annotations
 
 import hashlib
-
 from collections.abc import Callable
 from typing import Any
 

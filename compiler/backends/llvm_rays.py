@@ -4,14 +4,16 @@ Each query fills an Embree ``RTCRayHitN``/``RTCRayN`` packet on the stack from t
 vector registers and calls ``rtcIntersectN``/``rtcOccludedN`` (N = the target's width) on
 the scene stored in the library's global ``rdsl_embree_scene`` (set by the runtime before a
 render).  One call per packet; no Python per ray.  Packet layouts come from
-:mod:`rdsl.runtime.embree`, which checks them against the shipped Embree.
+:mod:`rdsl.core.embree_abi`, their llvmlite types from :mod:`.embree_llvm`.
 """
 
 from __future__ import annotations
 
 import llvmlite.ir as L
 
+from ...core.embree_abi import PacketLayout
 from .. import ir
+from . import embree_llvm as E
 from .llvm_ops import F32, I32, PTR, Lowering, const
 
 SCENE_GLOBAL = "rdsl_embree_scene"
@@ -50,8 +52,6 @@ def _entry_alloca(lw: Lowering, make) -> L.Value:
 
 
 def _lower_query(lw: Lowering, ins: ir.Instr) -> list[L.Value]:
-    from ...runtime import embree as E
-
     width = lw.m.width
     hit = ins.op is ir.Op.INTERSECT
     ops = [lw.v(o) for o in ins.operands]
@@ -90,7 +90,7 @@ def _lower_query(lw: Lowering, ins: ir.Instr) -> list[L.Value]:
 
         def make_valid(eb: L.IRBuilder) -> L.Value:
             v = eb.alloca(vty)
-            v.align = E.PacketLayout(width, hit).align
+            v.align = PacketLayout(width, hit).align
             v.type = PTR  # opaque pointer, as everywhere in the backend
             return v
 

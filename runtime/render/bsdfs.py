@@ -33,8 +33,8 @@ from pathlib import Path
 from typing import Any
 
 from ...compiler.diagnostics import CompileError
-from ...compiler.passes.specialize import Instance
 from ...core.color import ColorModel
+from ...core.scene_spec import Instance
 from ..scene.schema import spec_for
 from .colors import spectrum_value
 

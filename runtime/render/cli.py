@@ -1,16 +1,47 @@
 """``rdsl render``: load a scene, compile its kernels (or load them from the cache), render
-with a progress bar, write EXR plus a PNG preview, and end with a one-line summary."""
+with a progress bar, write EXR plus a PNG preview, and end with a one-line summary.
+
+:func:`add_commands` declares the subcommand on the top-level parser of ``rdsl/cli.py``."""
 
 from __future__ import annotations
 
+import argparse
 import sys
 import time
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
 from ...compiler.diagnostics import CompileError
+from ...core.color import VARIANTS
 from .image import write_exr, write_png
 from .progress import summary_line
+
+
+def add_commands(sub: argparse._SubParsersAction) -> dict[str, Callable[[Any], int]]:
+    """Add ``render`` to ``sub``; returns its handler by name."""
+    r = sub.add_parser("render", help="render a Mitsuba 3 XML scene")
+    r.add_argument("scene")
+    r.add_argument("-o", "--output", default=None,
+                   help="output EXR (default: the scene's name + .exr in the current "
+                        "folder); a tonemapped PNG is written beside it")
+    r.add_argument("--spp", type=int, default=None, help="samples per pixel (default: the "
+                   "scene's sampler)")
+    r.add_argument("--seed", type=int, default=None)
+    r.add_argument("--target", default="host")
+    r.add_argument("--variant", default="rgb",
+                   help=", ".join(VARIANTS) + " (default: rgb)")
+    r.add_argument("--threads", type=int, default=None, help="default: all cores")
+    r.add_argument("-D", dest="defines", action="append", default=[], metavar="NAME=VALUE",
+                   help="set a scene parameter declared with <default>")
+    r.add_argument("--report", action="store_true",
+                   help="print what specialization did and the kernel sizes")
+    r.add_argument("--no-specialize", dest="specialize", action="store_false",
+                   help="the generic build: parameters read at run time, every emitter kind")
+    r.add_argument("--triangulate", action="store_true",
+                   help="render spheres and disks as triangle meshes, not analytic shapes")
+    r.add_argument("--quiet", action="store_true", help="no progress bar")
+    return {"render": render_command}
 
 
 def render_command(args: Any) -> int:

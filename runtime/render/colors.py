@@ -15,8 +15,8 @@ from typing import Any
 import numpy as np
 
 from ...compiler.diagnostics import CompileError
-from ...compiler.passes.specialize import SpectrumValue
 from ...core.color import ColorModel
+from ...core.scene_spec import SpectrumValue
 
 
 def spectrum_value(value: Any, what: str, illuminant: bool = False, loc: Any = None
@@ -46,7 +46,7 @@ def emission_row(rgb: np.ndarray, model: ColorModel) -> tuple[np.ndarray, float]
     rgb = np.asarray(rgb, np.float64)
     if not model.spectral:
         return rgb, 1.0
-    from ..spectral import illuminant_from_rgb
+    from ...core.spectral import illuminant_from_rgb
 
     coeffs, scale = illuminant_from_rgb(rgb)
     return np.asarray(coeffs, np.float64), float(scale)
@@ -56,7 +56,7 @@ def encode_texels(texels: np.ndarray, model: ColorModel) -> np.ndarray:
     """Reflectance texels (..., 3) as ``model`` stores them."""
     if not model.spectral:
         return texels
-    from ..spectral import rgb_to_coeffs
+    from ...core.spectral import rgb_to_coeffs
 
     shape = texels.shape
     return np.asarray(rgb_to_coeffs(np.asarray(texels, np.float64).reshape(-1, 3)),
@@ -71,7 +71,7 @@ def emission_texels(rgb: np.ndarray, model: ColorModel) -> np.ndarray:
     rgb = np.asarray(rgb, np.float64).reshape(-1, 3)
     if not model.spectral:
         return np.concatenate([rgb, np.ones((len(rgb), 1))], axis=1)
-    from ..spectral import illuminant_from_rgb
+    from ...core.spectral import illuminant_from_rgb
 
     coeffs, scale = illuminant_from_rgb(rgb)
     return np.concatenate([np.asarray(coeffs, np.float64).reshape(-1, 3),

@@ -20,15 +20,10 @@ import numpy as np
 
 from ...compiler.build import Build
 from ...compiler.diagnostics import CompileError
-from ...compiler.passes.specialize import (
-    PARAM_BUFFER,
-    Instance,
-    SceneSpec,
-    describe,
-    parameter_slots,
-)
+from ...compiler.passes.specialize import PARAM_BUFFER, describe, parameter_slots
 from ...compiler.targets import Target
 from ...core.color import RGB, ColorModel
+from ...core.scene_spec import Instance, SceneSpec
 from ..scene import load_scene_description
 from .bsdfs import (
     BSDF_PLUGINS,

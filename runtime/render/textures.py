@@ -23,8 +23,8 @@ from typing import Any
 import numpy as np
 
 from ...compiler.diagnostics import CompileError
-from ...compiler.passes.specialize import Instance, SpectrumValue, TextureRef
 from ...core.color import RGB, ColorModel
+from ...core.scene_spec import Instance, SpectrumValue, TextureRef
 from .colors import encode_texels, spectrum_value
 
 # Mitsuba plugin -> rdsl file under stdlib/

@@ -5,7 +5,7 @@ sRGB projection, so that the RGB variant reads ``color.rgb`` and a spectral vari
 ``color.wavelengths`` / ``color.values``.
 
 Spectrum-to-RGB follows Mitsuba 3's ``spectrum_list_to_srgb`` with its tabulated CIE 1931
-curves (rdsl.runtime.spectral): 1000 evenly spaced samples over 360..830 nm of the
+curves (rdsl.core.spectral): 1000 evenly spaced samples over 360..830 nm of the
 piecewise-linear spectrum, reflectances seen under D65.
 """
 
@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from ...compiler.ir import Loc
-from .. import spectral
+from ...core import spectral
 from .errors import scene_error
 
 CIE_MIN = 360.0
@@ -56,7 +56,7 @@ def spectrum_to_xyz(wavelengths: np.ndarray, values: np.ndarray) -> np.ndarray:
 def spectrum_to_srgb(wavelengths, values, bounded: bool = True) -> tuple[float, float, float]:
     """What Mitsuba 3's rgb variants make of wavelength:value pairs: a reflectance
     (``bounded``) is seen under D65 and clamped to [0, 1], anything else only clamped at 0
-    (rdsl.runtime.spectral, with the tabulated CIE 1931 curves)."""
+    (rdsl.core.spectral, with the tabulated CIE 1931 curves)."""
     wl, v = np.asarray(wavelengths, np.float64), np.asarray(values, np.float64)
     rgb = (spectral.spectrum_to_rgb_reflectance(wl, v) if bounded
            else spectral.spectrum_to_rgb_emission(wl, v))

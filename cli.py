@@ -1,0 +1,51 @@
+"""The ``rdsl`` command line: the compiler's ``check``, ``ir`` and ``compile`` and the
+runtime's ``render``, on one parser.
+
+It sits above both layers, so that the compiler never imports the runtime.  User mistakes
+print diagnostics and exit with status 1; they never show a traceback.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from collections.abc import Callable
+from typing import Any
+
+from .compiler import cli as compiler_cli
+from .compiler.diagnostics import CompileError
+from .compiler.driver import InternalError
+from .runtime.render import cli as render_cli
+
+
+def parser() -> tuple[argparse.ArgumentParser, dict[str, Callable[[Any], int]]]:
+    """The ``rdsl`` argument parser and each subcommand's handler by name."""
+    p = argparse.ArgumentParser(prog="rdsl", description="A compiler for physically based "
+                                "rendering.")
+    sub = p.add_subparsers(dest="cmd", required=True)
+    commands = {**compiler_cli.add_commands(sub), **render_cli.add_commands(sub)}
+    return p, commands
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Run one ``rdsl`` subcommand; returns the exit status."""
+    p, commands = parser()
+    args = p.parse_args(argv)
+    try:
+        return commands[args.cmd](args)
+    except CompileError as e:
+        print(e.format(), file=sys.stderr)
+        return 1
+    except InternalError as e:
+        print(f"rdsl: {e}\nThis is a bug in rdsl; please report it with the input file.",
+              file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print("interrupted", file=sys.stderr)
+        return 130
+    finally:
+        sys.stdout.flush()
+
+
+if __name__ == "__main__":
+    sys.exit(main())
