@@ -134,7 +134,7 @@ def test_jit_checks_names_before_reading_the_source(tmp_path: Path):
 @pytest.mark.parametrize("cmd", ["render", "ir", "compile"])
 def test_cli_reports_a_bad_variant_before_reading_its_input(cmd: str, tmp_path: Path,
                                                           capsys):
-    from rdsl.compiler.cli import main
+    from rdsl.cli import main
 
     missing = tmp_path / ("scene.xml" if cmd == "render" else "kernel.rdsl")
     assert main([cmd, str(missing), "--variant", "rgbx"]) == 1
@@ -144,7 +144,7 @@ def test_cli_reports_a_bad_variant_before_reading_its_input(cmd: str, tmp_path: 
 
 
 def test_cli_render_reports_a_bad_target(tmp_path: Path, capsys):
-    from rdsl.compiler.cli import main
+    from rdsl.cli import main
 
     assert main(["render", str(tmp_path / "scene.xml"), "--target", "avx1024"]) == 1
     err = capsys.readouterr().err
