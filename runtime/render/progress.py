@@ -74,10 +74,13 @@ class Progress:
         self.done: float = 0  # as the caller counts: ints stay ints in the bar's "32/64"
         self.start = time.perf_counter()
         self._finished = False
-        # a whole total prints as "32/64", not "32.0/64.0"
-        whole = int(self.total) if self.total.is_integer() else self.total
-        self._bar = tqdm(total=whole, desc=label, unit=unit, file=self.stream,
-                         mininterval=min_interval, disable=not (enabled and interactive))
+        # no tqdm object unless it draws: even a disabled one starts tqdm's monitor thread
+        self._bar: tqdm | None = None
+        if enabled and interactive:
+            # a whole total prints as "32/64", not "32.0/64.0"
+            whole = int(self.total) if self.total.is_integer() else self.total
+            self._bar = tqdm(total=whole, desc=label, unit=unit, file=self.stream,
+                             mininterval=min_interval)
         if self.plain:
             self._write_line()
 
@@ -92,7 +95,8 @@ class Progress:
 
     def update(self, done: float) -> None:
         """Set the work done so far (not an increment, unlike tqdm's ``update``)."""
-        self._bar.update(done - self.done)
+        if self._bar is not None:
+            self._bar.update(done - self.done)
         self.done = done
 
     def finish(self) -> None:
@@ -100,7 +104,8 @@ class Progress:
         if self._finished:
             return
         self._finished = True
-        self._bar.close()
+        if self._bar is not None:
+            self._bar.close()
         if self.plain:
             self._write_line()
 
