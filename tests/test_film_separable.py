@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 import rdsl
 from rdsl.runtime.render.film import film_reach, new_accumulator
-from rdsl.runtime.render.renderer import _literal
+from rdsl.runtime.render.kernel_source import literal
 
 FILTERS = [(0, 0.5), (1, 1.0), (1, 1.6), (2, 0.5)]  # (kind, param): box, tent, gaussian
 
@@ -19,7 +19,7 @@ def film_for(kind: int, param: float, spp: int) -> dict:
 
 
 def source(film: dict) -> str:
-    lit = _literal(dict(film, spp=0), "Film")
+    lit = literal(dict(film, spp=0), "Film")
     m = 2 * film_reach(film) + 1
     fields = ", ".join(f"w{k}: Float" for k in range(2 * m))
     ws = ", ".join([f"w{k}: film_axis_weight(film, x, gx - n + {k})" for k in range(m)]

@@ -18,6 +18,9 @@ from ...compiler.diagnostics import CompileError
 from ...core.color import RGB, ColorModel
 from .colors import emission_row, emission_texels
 
+# Mitsuba plugin -> rdsl file under stdlib/, for the emitters that are scene instances (the
+# area lights of shapes); the others are rows of the emitter tables
+EMITTER_PLUGINS = {"area": "emitter.area"}
 KINDS = {"area": 0, "point": 1, "spot": 2, "directional": 3, "constant": 4, "envmap": 5}
 ENVIRONMENTS = ("constant", "envmap")
 STRIDE = 24  # floats per emitter in E (lights.rdsl: emitter_stride())

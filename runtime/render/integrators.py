@@ -27,15 +27,15 @@ __all__ = ["AOV_TYPES", "INTEGRATORS", "STOKES_CHANNELS", "IntegratorPlan", "int
 
 INTEGRATORS = ("path", "direct", "aov", "stokes")
 RADIANCE = ("path", "direct")
-# AOV type -> (channel suffixes, rdsl expression of the `Aov` struct `aov`, per channel)
-AOV_TYPES: dict[str, tuple[tuple[str, ...], tuple[str, ...]]] = {
-    "depth": (("T",), ("aov.depth",)),
-    "position": (("X", "Y", "Z"), ("aov.position.x", "aov.position.y", "aov.position.z")),
-    "geo_normal": (("X", "Y", "Z"),
-                   ("aov.geo_normal.x", "aov.geo_normal.y", "aov.geo_normal.z")),
-    "sh_normal": (("X", "Y", "Z"), ("aov.sh_normal.x", "aov.sh_normal.y", "aov.sh_normal.z")),
-    "uv": (("U", "V"), ("aov.uv.x", "aov.uv.y")),
-    "albedo": (("R", "G", "B"), ()),  # a Spectrum: expanded by the kernel writer
+# AOV type -> its channels' suffixes (the kernel's rdsl expressions of them:
+# runtime/render/kernel_source.py)
+AOV_TYPES: dict[str, tuple[str, ...]] = {
+    "depth": ("T",),
+    "position": ("X", "Y", "Z"),
+    "geo_normal": ("X", "Y", "Z"),
+    "sh_normal": ("X", "Y", "Z"),
+    "uv": ("U", "V"),
+    "albedo": ("R", "G", "B"),
 }
 # the `stokes` integrator's channels, in Mitsuba's order (stokes.cpp `aov_names`)
 STOKES_CHANNELS = tuple(f"S{i}.{c}" for i in range(4) for c in "RGB")
@@ -55,7 +55,7 @@ class IntegratorPlan:
         """The channels after the base ones, as the EXR names them, in film order: the Stokes
         components first (as Mitsuba's stokes integrator inserts them), then the AOVs."""
         return ([*STOKES_CHANNELS] if self.stokes is not None else []) + \
-            [f"{name}.{s}" for name, kind in self.aovs for s in AOV_TYPES[kind][0]]
+            [f"{name}.{s}" for name, kind in self.aovs for s in AOV_TYPES[kind]]
 
     def check_variant(self, model: ColorModel) -> None:
         """A ``stokes`` integrator needs a polarized variant: an error at its XML otherwise."""

@@ -1,10 +1,12 @@
-"""A small progress bar on stderr, and the one-line summaries the renderer prints.
+"""The render's progress on stderr (a ``tqdm`` bar), and the one-line summaries the renderer
+prints.
 
-On a terminal (or with ``force=True``) the bar redraws one line in place::
+On a terminal (or with ``force=True``) tqdm redraws one line in place::
 
-    Rendering [##########..........]  50%  1.2 s  3.41 M samples/s  ETA 1.2 s
+    rendering:  50%|█████     | 32/64 [00:01<00:01, 21.3spp/s]
 
-Otherwise (a log file, CI) it prints a plain line at 0, 25, 50, 75 and 100% only.
+Otherwise (a log file, CI) there is no bar and no carriage return: one plain line when the
+work starts and one when it ends (``rendering 100%  1.52 s  42.10 spp/s``).
 """
 
 from __future__ import annotations
@@ -12,6 +14,8 @@ from __future__ import annotations
 import sys
 import time
 from typing import TextIO
+
+from tqdm import tqdm
 
 __all__ = ["Progress", "format_duration", "format_rate", "summary_line"]
 
@@ -50,27 +54,35 @@ def summary_line(what: str, seconds: float, amount: float | None = None,
 
 
 class Progress:
-    """Progress of ``total`` units of work; ``update(done)`` or ``advance(n)``, then ``finish()``.
+    """Progress of ``total`` units of work; ``update(done)`` or ``advance(n)``, then
+    ``finish()``.  Usable as a context manager (``finish`` on exit).
 
-    Usable as a context manager (``finish`` on exit).  ``enabled=False`` silences it;
-    ``force=True`` draws the bar even when the stream is not a terminal."""
+    ``enabled=False`` silences it.  The bar is drawn only where someone watches it: on a
+    terminal, or anywhere with ``force=True``; a stream that is not a terminal gets the two
+    plain lines instead, since tqdm's redraws would fill a log with carriage returns (and
+    tqdm's own ``disable=None`` would print nothing at all)."""
 
     def __init__(self, total: float, label: str = "Rendering", unit: str = "samples",
                  stream: TextIO | None = None, force: bool = False, enabled: bool = True,
-                 width: int = 30, min_interval: float = 0.1) -> None:
+                 min_interval: float = 0.1) -> None:
         self.total = max(float(total), 0.0)
-        self.label, self.unit, self.width = label, unit, width
+        self.label, self.unit = label, unit
         self.stream = stream if stream is not None else sys.stderr
-        self.enabled = enabled
         isatty = getattr(self.stream, "isatty", None)
-        self.interactive = force or bool(isatty and isatty())
-        self.min_interval = min_interval
-        self.done = 0.0
+        interactive = force or bool(isatty and isatty())
+        self.plain = enabled and not interactive
+        self.done: float = 0  # as the caller counts: ints stay ints in the bar's "32/64"
         self.start = time.perf_counter()
-        self._last_draw = -1.0
-        self._next_quarter = 0
         self._finished = False
-        self._draw(final=False)
+        # no tqdm object unless it draws: even a disabled one starts tqdm's monitor thread
+        self._bar: tqdm | None = None
+        if enabled and interactive:
+            # a whole total prints as "32/64", not "32.0/64.0"
+            whole = int(self.total) if self.total.is_integer() else self.total
+            self._bar = tqdm(total=whole, desc=label, unit=unit, file=self.stream,
+                             mininterval=min_interval)
+        if self.plain:
+            self._write_line()
 
     def __enter__(self) -> Progress:  # noqa: PYI034 (typing.Self needs 3.11)
         return self
@@ -78,55 +90,30 @@ class Progress:
     def __exit__(self, *exc: object) -> None:
         self.finish()
 
-    @property
-    def elapsed(self) -> float:
-        return time.perf_counter() - self.start
-
-    def fraction(self) -> float:
-        return 1.0 if self.total == 0 else min(self.done / self.total, 1.0)
-
     def advance(self, n: float = 1) -> None:
         self.update(self.done + n)
 
     def update(self, done: float) -> None:
-        self.done = float(done)
-        self._draw(final=False)
+        """Set the work done so far (not an increment, unlike tqdm's ``update``)."""
+        if self._bar is not None:
+            self._bar.update(done - self.done)
+        self.done = done
 
     def finish(self) -> None:
-        """Draw the final state (once) and end the line."""
+        """Show the final state (once) and end the line."""
         if self._finished:
             return
         self._finished = True
-        self._draw(final=True)
+        if self._bar is not None:
+            self._bar.close()
+        if self.plain:
+            self._write_line()
 
-    def line(self) -> str:
-        """The current status as text (without the bar)."""
-        f, t = self.fraction(), self.elapsed
+    def _write_line(self) -> None:
+        t = time.perf_counter() - self.start
+        f = 1.0 if self.total == 0 else min(self.done / self.total, 1.0)
         text = f"{self.label} {100 * f:3.0f}%  {format_duration(t)}"
         if self.done > 0 and t > 0:
             text += f"  {format_rate(self.done, t, self.unit)}"
-            if 0 < f < 1:
-                text += f"  ETA {format_duration(t * (1 - f) / f)}"
-        return text
-
-    def _draw(self, final: bool) -> None:
-        if not self.enabled:
-            return
-        if self.interactive:
-            now = self.elapsed
-            if not final and now - self._last_draw < self.min_interval and self._last_draw >= 0:
-                return
-            self._last_draw = now
-            filled = round(self.fraction() * self.width)
-            bar = "#" * filled + "." * (self.width - filled)
-            head, _, rest = self.line().partition(" ")
-            self.stream.write(f"\r{head} [{bar}] {rest}\x1b[K" + ("\n" if final else ""))
-        else:
-            quarter = int(self.fraction() * 4 + 1e-9)
-            if final:
-                quarter = 4
-            if quarter < self._next_quarter:
-                return
-            self._next_quarter = quarter + 1
-            self.stream.write(self.line() + "\n")
+        self.stream.write(text + "\n")
         self.stream.flush()

@@ -1,11 +1,11 @@
 """Render a Mitsuba scene with compiled rdsl kernels.
 
 Python's part is set-up and bookkeeping only: it loads the scene, flattens its triangles
-into buffers, builds the Embree scene, writes the scene's render kernel (a few lines of
-rdsl that call the stdlib integrator, camera and film with the scene's constants) and runs
-it in batches of samples.  Every per-sample computation happens in compiled rdsl code:
-camera rays, intersection (Embree, called from the kernel), shading, light sampling and
-the film's reconstruction filter.
+into buffers, builds the Embree scene, has the scene's render kernel written (the template
+stdlib/render/kernel.rdsl.in filled in by kernel_source.py: the stdlib integrator, camera
+and film called with the scene's constants) and runs it in batches of samples.  Every
+per-sample computation happens in compiled rdsl code: camera rays, intersection (Embree,
+called from the kernel), shading, light sampling and the film's reconstruction filter.
 """
 
 from __future__ import annotations
@@ -26,25 +26,23 @@ from ...core.color import RGB, ColorModel
 from ...core.scene_spec import Instance, SceneSpec
 from ..scene import load_scene_description
 from .bsdfs import (
-    BSDF_PLUGINS,
     bsdf_instance,
     dispersion_warnings,
     polarization_warnings,
     split_leaves,
 )
-from .camera import camera_uniforms
 from .colors import spectrum_value
+from .emitters import EMITTER_PLUGINS, EmitterTables, emitter_tables
 from .emitters import KINDS as EMITTER_KINDS
-from .emitters import EmitterTables, emitter_tables
-from .film import develop, film_reach, film_uniforms, new_accumulator
-from .integrators import AOV_TYPES, IntegratorPlan, direct_samples, integrator_plan
+from .film import develop, film_uniforms, new_accumulator
+from .integrators import integrator_plan
+from .kernel_source import kernel_source
 from .progress import Progress
 from .shapes import FLAGS as SHAPE_FLAGS
 from .shapes import KINDS as SHAPE_KINDS
 from .shapes import RECORD, shape_record, user_geometry
-from .textures import TEXTURE_PLUGINS, TextureTable
+from .textures import TextureTable
 
-EMITTER_PLUGINS = {"area": "emitter.area"}
 # samples per kernel call: small enough that a batch's sample buffers stay in cache
 BATCH_SAMPLES = 1 << 17
 
@@ -178,149 +176,6 @@ def _area_instance(em: Any, textures: TextureTable) -> Instance:
                                                            "emitted")})
     return Instance(em.type, {"radiance": spectrum_value(
         radiance, "area.radiance", illuminant=True, loc=em.loc)})
-
-
-def _literal(value: Any, struct: str | None = None) -> str:
-    """An rdsl literal for a number, a vector (list) or a struct (dict)."""
-    if isinstance(value, dict):
-        nested = {"basis": "Frame"}
-        fields = ", ".join(f"{k}: {_literal(v, nested.get(k))}" for k, v in value.items())
-        return f"{struct} {{ {fields} }}"
-    if isinstance(value, (list, tuple, np.ndarray)):
-        return f"Vec{len(value)}(" + ", ".join(_literal(float(x)) for x in value) + ")"
-    if isinstance(value, bool):
-        return "true" if value else "false"
-    if isinstance(value, (int, np.integer)):
-        return str(int(value))
-    text = repr(float(np.float32(value)))
-    return text if ("." in text or "e" in text or "n" in text) else text + ".0"
-
-
-def _radiance_call(plan: IntegratorPlan, bufs: SceneBuffers) -> str:
-    """The kernel's line computing `L` (and, for AOVs, the `aov` struct)."""
-    integ = plan.radiance
-    lights = f"{bufs.nlight}, {bufs.lights.env}"
-    args = "P, N, UV, F, G, LC, LT, T, EK, E, ENV"
-    if integ is None:
-        line = "    let L = Spectrum(0.0);"
-    elif integ.type == "direct":
-        es, bs = direct_samples(integ)
-        hide = "true" if integ.params.get("hide_emitters") else "false"
-        line = f"    let (L, r3) = direct_li(ray, r2, {es}, {bs}, {hide}, {lights}, {args});"
-    else:
-        line = (f"    let (L, r3) = path_li(ray, r2, {int(integ.params.get('max_depth', -1))}, "
-                f"{int(integ.params.get('rr_depth', 5))}, {lights}, {args});")
-    if plan.aovs:
-        line += "\n    let aov = aov_sample(ray, P, N, UV, F, G, T);"
-    if plan.stokes is not None:  # the Stokes vector in the sensor's frame (as Mitsuba)
-        line += "\n    let Ls = stokes_sensor_frame(L, ray.d, cam.basis.t);"
-    return line
-
-
-def _aov_fields(plan: IntegratorPlan, channels: int, spectral: bool = False
-                ) -> list[tuple[str, str]]:
-    """(rdsl type, expression) of each FilmSample AOV field, in film channel order: the
-    Stokes components S0..S3 of a ``stokes`` integrator as RGB each (Mitsuba's layout; the
-    one value repeated in mono), then the AOVs."""
-    fields = []
-    if plan.stokes is not None:
-        for i in range(4):
-            s = f"mueller_entry(Ls, {i}, 0)"
-            fields.append(("Vec3", f"to_srgb(Spectrum({s}) * wavelength_weight)" if spectral
-                           else f"Vec3(mean({s}))"))
-    for _, kind in plan.aovs:
-        if kind == "albedo":  # a Spectrum; mono repeats its one value in R, G and B
-            fields.append(("Vec3", "Vec3(mean(aov.albedo))") if channels == 1
-                          else ("Vec3", "to_srgb(aov.albedo * wavelength_weight)") if spectral
-                          else ("Spectrum", "aov.albedo"))
-        else:
-            fields += [("Float", e) for e in AOV_TYPES[kind][1]]
-    return fields
-
-
-def kernel_source(desc: Any, bufs: SceneBuffers, bsdfs: list[Instance],
-                  emitters: list[Instance], model: ColorModel = RGB) -> str:
-    """The scene's render kernel in rdsl: constants of this scene, stdlib code for the rest.
-    A spectral kernel samples its wavelengths first and gives the film linear sRGB."""
-    spectral, channels = model.spectral, model.channels
-    # a polarized L is a Mueller matrix: the film records the intensity (entry [0][0], the
-    # first Stokes component for the unpolarized emitters), as Mitsuba's film does
-    mono_pol = model.mono and model.polarized
-    plan = integrator_plan(desc.integrator)
-    plan.check_variant(model)
-    aov_fields = _aov_fields(plan, channels, spectral)
-    cam = camera_uniforms(desc.sensor)
-    film = film_uniforms(desc.sensor.film, 1, channels=channels + len(plan.aov_channel_names()))
-    imports = sorted({BSDF_PLUGINS[x.plugin] for b in bsdfs for x in [b, *b.children]}
-                     | {EMITTER_PLUGINS[e.plugin] for e in emitters}
-                     | {TEXTURE_PLUGINS[t.plugin] for t in bufs.textures})
-    lines = ["// generated by rdsl render for " + Path(desc.path).name,
-             "import render.path;", "import render.camera;", "import render.film;",
-             *(["import spectral;"] if spectral else [])]
-    if plan.radiance is not None and plan.radiance.type == "direct":
-        lines.append("import render.direct;")
-    if plan.aovs:
-        lines.append("import render.aov;")
-    if plan.stokes is not None:
-        lines.append("import render.stokes;")
-    lines += [f"import {m};" for m in imports]
-    m = 2 * film_reach(film) + 1  # columns (rows) one sample reaches
-    wfields = ", ".join(f"w{k}: Float" for k in range(2 * m))
-    winit = ", ".join(f"w{k}: wx{k}" if k < m else f"w{k}: wy{k - m}" for k in range(2 * m))
-    lines += [
-        "",
-        f"struct FilmSample {{ value: "
-        f"{'Vec3' if spectral else 'Unpolarized' if mono_pol else 'Spectrum'}, bad: Bool, "
-        + "".join(f"aov{k}: {t}, " for k, (t, _) in enumerate(aov_fields)) + f"{wfields} }}",
-        "",
-        "// sample j of a batch: sample BATCH[0] + j / cells of cell j % cells (sample-major,",
-        "// as film_pass reads them); BATCH = [first sample, spp, seed], the same for every j",
-        "fn render_sample(j: Int, BATCH: [Int], P: [Float], N: [Float],",
-        "                 UV: [Float], F: [Int], G: [Int], LC: [Float], LT: [Int],",
-        "                 T: [Float], EK: [Int], E: [Float], ENV: [Float]) -> FilmSample {",
-        f"    let cam = {_literal(cam, 'Camera')};",
-        f"    let film = {_literal(dict(film, spp=1), 'Film')};",
-        f"    let cell = j % {film['grid_w'] * film['grid_h']};",
-        f"    let s = BATCH[0] + j / {film['grid_w'] * film['grid_h']};",
-        "    let spp = BATCH[1];",
-        "    let seed = UInt(BATCH[2]);",
-        f"    let gx = cell % {film['grid_w']} + {film['grid_x']};",
-        f"    let gy = cell / {film['grid_w']} + {film['grid_y']};",
-        "    let stream = UInt64(cell) * UInt64(spp) + UInt64(s);",
-        *(["    let (rng, u_wavelength) = next_1d(pcg32_seed(UInt64(seed), stream));",
-           "    let wavelength_weight = sample_wavelengths(u_wavelength);"] if spectral else
-          ["    let rng = pcg32_seed(UInt64(seed), stream);"]),
-        "    let (r1, u_pixel) = next_2d(rng);",
-        "    let (r2, u_lens) = next_2d(r1);",
-        "    let pos = Vec2(Float(gx) + u_pixel.x, Float(gy) + u_pixel.y);",
-        "    let ray = camera_ray_px(cam, pos, u_lens);",
-        _radiance_call(plan, bufs),
-        "    // a NaN or infinite estimate is counted and left out (zero value and weights)",
-        "    let ok = is_finite(mean(L));",
-        "    let k = select(ok, 1.0, 0.0);",
-        f"    let n = {film_reach(film)};",
-    ]
-    for k in range(m):
-        lines.append(f"    let wx{k} = k * film_axis_weight(film, pos.x, gx - n + {k});")
-        lines.append(f"    let wy{k} = k * film_axis_weight(film, pos.y, gy - n + {k});")
-    lines += [
-        "    return FilmSample { value: "
-        + ("to_srgb(L * wavelength_weight)" if spectral else "unpolarized(L)" if mono_pol
-           else "L") + " * k, bad: !ok, "
-        + "".join(f"aov{k}: {e} * k, " for k, (_, e) in enumerate(aov_fields))
-        + f"{winit} }};",
-        "}",
-        "",
-        "// the film's layout is a constant of the scene, so its loops and filter fold",
-        "// FB = [samples per cell in the batch, samples in the batch]",
-        "fn film_pass(pixel: Int, FB: [Int], S: [Float], acc: [Float]) {",
-        f"    var film = {_literal(dict(film, spp=0), 'Film')};",
-        "    film.spp = FB[0];",
-        "    film_accumulate_separable(pixel, film, S, FB[1], acc);",
-        "}",
-        "",
-    ]
-    return "\n".join(lines)
 
 
 class Scene:
