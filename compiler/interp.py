@@ -13,12 +13,15 @@ constants with it, so the optimizer and the interpreter can never disagree.
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from typing import Any
 
 import numpy as np
 
+from .builtins import F32_INTRINSICS
 from .ir import (
+    CMP_OPS,
+    ELEMENTWISE_OPS,
     Block,
     BufferType,
     Function,
@@ -115,112 +118,83 @@ def coerce(value: Any, t: Type) -> Any:
     return tuple(coerce(v, ct) for v, ct in zip(value, comps))
 
 
-def _f32_unary(op: Op, a: np.float32) -> Any:
-    if op is Op.NEG:
-        return bits_f32(f32_bits(a) ^ 0x8000_0000)
-    if op is Op.ABS:
-        return bits_f32(f32_bits(a) & 0x7FFF_FFFF)
-    if op is Op.SQRT:
-        return np.sqrt(a)
-    if op is Op.FLOOR:
-        return np.floor(a)
-    if op is Op.CEIL:
-        return np.ceil(a)
-    raise InterpError(f"'{op.value}' is not defined on f32")
+# One table per operand kind, keyed by op: the exact scalar semantics of each op.
+
+_F32_UNARY: dict[Op, Callable[[np.float32], Any]] = {
+    Op.NEG: lambda a: bits_f32(f32_bits(a) ^ 0x8000_0000),
+    Op.ABS: lambda a: bits_f32(f32_bits(a) & 0x7FFF_FFFF),
+    **{op: i.f32 for op, i in F32_INTRINSICS.items()},
+}
+
+_F32_BINARY: dict[Op, Callable[[np.float32, np.float32], Any]] = {
+    Op.ADD: lambda a, b: a + b,
+    Op.SUB: lambda a, b: a - b,
+    Op.MUL: lambda a, b: a * b,
+    Op.DIV: lambda a, b: a / b,
+    Op.REM: np.fmod,
+    Op.MIN: lambda a, b: a if a < b else b,  # noqa: FURB136 -- select(a < b, a, b)
+    Op.MAX: lambda a, b: a if a > b else b,  # noqa: FURB136 -- select(a > b, a, b)
+}
+
+_INT_UNARY: dict[Op, Callable[[int], int]] = {
+    Op.NEG: lambda a: -a,
+    Op.NOT: lambda a: ~a,
+    Op.ABS: abs,
+}
 
 
-def _f32_binary(op: Op, a: np.float32, b: np.float32) -> Any:
-    if op is Op.ADD:
-        return a + b
-    if op is Op.SUB:
-        return a - b
-    if op is Op.MUL:
-        return a * b
-    if op is Op.DIV:
-        return a / b
-    if op is Op.REM:
-        return np.fmod(a, b)
-    if op is Op.MIN:
-        return a if a < b else b  # noqa: FURB136 -- select(a < b, a, b)
-    if op is Op.MAX:
-        return a if a > b else b  # noqa: FURB136 -- select(a > b, a, b)
-    raise InterpError(f"'{op.value}' is not defined on f32")
+def _int_divrem(op: Op, a: int, b: int) -> int:
+    if b == 0:
+        return 0
+    q = abs(a) // abs(b)  # truncate toward zero
+    if (a < 0) != (b < 0):
+        q = -q
+    return q if op is Op.DIV else a - b * q
 
 
-def _int_unary(op: Op, name: str, a: int) -> Any:
-    if op is Op.NEG:
-        return wrap_int(-a, name)
-    if op is Op.NOT:
-        return wrap_int(~a, name)
-    if op is Op.ABS:
-        return wrap_int(abs(a), name)
-    raise InterpError(f"'{op.value}' is not defined on {name}")
+# (a, b, bit width) -> the unwrapped result; the shift amount is taken modulo the width and
+# `>>` is arithmetic for i32 because a is then signed (non-negative otherwise)
+_INT_BINARY: dict[Op, Callable[[int, int, int], int]] = {
+    Op.ADD: lambda a, b, bits: a + b,
+    Op.SUB: lambda a, b, bits: a - b,
+    Op.MUL: lambda a, b, bits: a * b,
+    Op.DIV: lambda a, b, bits: _int_divrem(Op.DIV, a, b),
+    Op.REM: lambda a, b, bits: _int_divrem(Op.REM, a, b),
+    Op.AND: lambda a, b, bits: a & b,
+    Op.OR: lambda a, b, bits: a | b,
+    Op.XOR: lambda a, b, bits: a ^ b,
+    Op.SHL: lambda a, b, bits: a << (b % bits),
+    Op.SHR: lambda a, b, bits: a >> (b % bits),
+    Op.MIN: lambda a, b, bits: a if a < b else b,  # noqa: FURB136
+    Op.MAX: lambda a, b, bits: a if a > b else b,  # noqa: FURB136
+}
+
+_BOOL_UNARY: dict[Op, Callable[[bool], bool]] = {Op.NOT: lambda a: not a}
+
+_BOOL_BINARY: dict[Op, Callable[[bool, bool], bool]] = {
+    Op.AND: lambda a, b: a and b,
+    Op.OR: lambda a, b: a or b,
+    Op.XOR: lambda a, b: a != b,
+    Op.MIN: lambda a, b: a if a < b else b,  # noqa: FURB136 -- select(a < b, a, b)
+    Op.MAX: lambda a, b: a if a > b else b,  # noqa: FURB136 -- select(a > b, a, b)
+}
+
+# numpy float32 comparisons are IEEE: ordered, except != which is unordered
+_COMPARE: dict[Op, Callable[[Any, Any], Any]] = {
+    Op.EQ: lambda a, b: a == b,
+    Op.NE: lambda a, b: a != b,
+    Op.LT: lambda a, b: a < b,
+    Op.LE: lambda a, b: a <= b,
+    Op.GT: lambda a, b: a > b,
+    Op.GE: lambda a, b: a >= b,
+}
 
 
-def _int_binary(op: Op, name: str, a: int, b: int) -> Any:
-    bits = 64 if name == "u64" else 32
-    if op is Op.ADD:
-        r = a + b
-    elif op is Op.SUB:
-        r = a - b
-    elif op is Op.MUL:
-        r = a * b
-    elif op in (Op.DIV, Op.REM):
-        if b == 0:
-            r = 0
-        else:
-            q = abs(a) // abs(b)  # truncate toward zero
-            if (a < 0) != (b < 0):
-                q = -q
-            r = q if op is Op.DIV else a - b * q
-    elif op is Op.AND:
-        r = a & b
-    elif op is Op.OR:
-        r = a | b
-    elif op is Op.XOR:
-        r = a ^ b
-    elif op is Op.SHL:
-        r = a << (b % bits)
-    elif op is Op.SHR:
-        r = a >> (b % bits)  # a is signed for i32 (arithmetic), non-negative otherwise
-    elif op is Op.MIN:
-        r = a if a < b else b  # noqa: FURB136
-    elif op is Op.MAX:
-        r = a if a > b else b  # noqa: FURB136
-    else:
+def _rule(table: dict[Op, Callable[..., Any]], op: Op, name: str) -> Callable[..., Any]:
+    rule = table.get(op)
+    if rule is None:
         raise InterpError(f"'{op.value}' is not defined on {name}")
-    return wrap_int(r, name)
-
-
-def _bool_op(op: Op, a: bool, b: bool | None = None) -> bool:
-    if op is Op.NOT:
-        return not a
-    if op is Op.AND:
-        return a and b
-    if op is Op.OR:
-        return a or b
-    if op is Op.XOR:
-        return a != b
-    if op is Op.MIN:
-        return a if a < b else b  # noqa: FURB136 -- select(a < b, a, b)
-    if op is Op.MAX:
-        return a if a > b else b  # noqa: FURB136 -- select(a > b, a, b)
-    raise InterpError(f"'{op.value}' is not defined on bool")
-
-
-def _compare(op: Op, a: Any, b: Any) -> bool:
-    # numpy float32 comparisons are IEEE: ordered, except != which is unordered
-    if op is Op.EQ:
-        return bool(a == b)
-    if op is Op.NE:
-        return bool(a != b)
-    if op is Op.LT:
-        return bool(a < b)
-    if op is Op.LE:
-        return bool(a <= b)
-    if op is Op.GT:
-        return bool(a > b)
-    return bool(a >= b)
+    return rule
 
 
 def _elementwise(op: Op, t: Type, args: Sequence[Any]) -> Any:
@@ -229,13 +203,18 @@ def _elementwise(op: Op, t: Type, args: Sequence[Any]) -> Any:
     if not isinstance(t, ScalarType):
         comps = components(t)
         return tuple(_elementwise(op, ct, [a[i] for a in args]) for i, ct in enumerate(comps))
+    unary = len(args) == 1
     if t.name == "f32":
-        fargs = [np.float32(a) for a in args]
-        return _f32_unary(op, *fargs) if len(fargs) == 1 else _f32_binary(op, *fargs)
+        return _rule(_F32_UNARY if unary else _F32_BINARY, op, "f32")(
+            *[np.float32(a) for a in args])
     if t.name == "bool":
-        return _bool_op(op, *[bool(a) for a in args])
+        return _rule(_BOOL_UNARY if unary else _BOOL_BINARY, op, "bool")(
+            *[bool(a) for a in args])
     iargs = [int(a) for a in args]
-    return _int_unary(op, t.name, *iargs) if len(iargs) == 1 else _int_binary(op, t.name, *iargs)
+    if unary:
+        return wrap_int(_rule(_INT_UNARY, op, t.name)(*iargs), t.name)
+    bits = 64 if t.name == "u64" else 32
+    return wrap_int(_rule(_INT_BINARY, op, t.name)(*iargs, bits), t.name)
 
 
 def cast_scalar(a: Any, src: ScalarType, dst: ScalarType) -> Any:
@@ -279,46 +258,75 @@ def _broadcast(a: Any, t: Type) -> Any:
     return a
 
 
+# (result type, operand types, operand values, attributes) -> the result
+_PureRule = Callable[[Type, Sequence[Type], Sequence[Any], dict[str, Any]], Any]
+
+
+def _const(rt: Type, ts: Sequence[Type], args: Sequence[Any], attrs: dict[str, Any]) -> Any:
+    if "value" not in attrs:
+        raise InterpError(f"constant {attrs} has no value (unresolved trait?)")
+    return coerce(attrs["value"], rt)
+
+
+def _elementwise_op(op: Op) -> _PureRule:
+    def rule(rt: Type, ts: Sequence[Type], args: Sequence[Any], attrs: dict[str, Any]) -> Any:
+        return _elementwise(op, ts[0], args)
+    return rule
+
+
+def _compare_op(op: Op) -> _PureRule:
+    def rule(rt: Type, ts: Sequence[Type], args: Sequence[Any], attrs: dict[str, Any]) -> Any:
+        if not isinstance(ts[0], ScalarType):
+            raise InterpError(f"'{op.value}' is defined on scalars only")
+        return bool(_COMPARE[op](args[0], args[1]))
+    return rule
+
+
+def _conversion(op: Op, fn: Callable[[Any, ScalarType, ScalarType], Any]) -> _PureRule:
+    def rule(rt: Type, ts: Sequence[Type], args: Sequence[Any], attrs: dict[str, Any]) -> Any:
+        src, dst = ts[0], rt
+        if not (isinstance(src, ScalarType) and isinstance(dst, ScalarType)):
+            raise InterpError(f"'{op.value}' from {src} to {dst} is not supported")
+        return fn(args[0], src, dst)
+    return rule
+
+
+def _make(rt: Type, ts: Sequence[Type], args: Sequence[Any], attrs: dict[str, Any]) -> Any:
+    if isinstance(rt, SpectrumType):
+        raise InterpError("spectrum values are not supported; run lift first")
+    return tuple(args)
+
+
+def _insert(rt: Type, ts: Sequence[Type], args: Sequence[Any], attrs: dict[str, Any]) -> Any:
+    i = attrs["index"]
+    agg = args[0]
+    return agg[:i] + (args[1],) + agg[i + 1:]
+
+
+_PURE: dict[Op, _PureRule] = {
+    Op.CONST: _const,
+    **{op: _elementwise_op(op) for op in ELEMENTWISE_OPS},
+    **{op: _compare_op(op) for op in CMP_OPS},
+    Op.SELECT: lambda rt, ts, args, attrs: args[1] if args[0] else args[2],
+    Op.CAST: _conversion(Op.CAST, cast_scalar),
+    Op.BITCAST: _conversion(Op.BITCAST, bitcast_scalar),
+    Op.MAKE: _make,
+    Op.EXTRACT: lambda rt, ts, args, attrs: args[0][attrs["index"]],
+    Op.INSERT: _insert,
+    Op.BROADCAST: lambda rt, ts, args, attrs: _broadcast(args[0], rt),
+    Op.LANE: lambda rt, ts, args, attrs: np.int32(0),
+    Op.ANY: lambda rt, ts, args, attrs: bool(args[0]),
+}
+
+
 def eval_pure(op: Op, result_type: Type, operand_types: Sequence[Type], args: Sequence[Any],
               attrs: dict[str, Any]) -> Any:
     """Evaluate one pure single-result op on interpreter values.  Raises InterpError if the
     op is not supported here."""
-    if op is Op.CONST:
-        if "value" not in attrs:
-            raise InterpError(f"constant {attrs} has no value (unresolved trait?)")
-        return coerce(attrs["value"], result_type)
-    if op in (Op.ADD, Op.SUB, Op.MUL, Op.DIV, Op.REM, Op.NEG, Op.AND, Op.OR, Op.XOR, Op.NOT,
-              Op.SHL, Op.SHR, Op.SQRT, Op.FLOOR, Op.CEIL, Op.ABS, Op.MIN, Op.MAX):
-        return _elementwise(op, operand_types[0], args)
-    if op in (Op.EQ, Op.NE, Op.LT, Op.LE, Op.GT, Op.GE):
-        if not isinstance(operand_types[0], ScalarType):
-            raise InterpError(f"'{op.value}' is defined on scalars only")
-        return _compare(op, args[0], args[1])
-    if op is Op.SELECT:
-        return args[1] if args[0] else args[2]
-    if op in (Op.CAST, Op.BITCAST):
-        src, dst = operand_types[0], result_type
-        if not (isinstance(src, ScalarType) and isinstance(dst, ScalarType)):
-            raise InterpError(f"'{op.value}' from {src} to {dst} is not supported")
-        fn = cast_scalar if op is Op.CAST else bitcast_scalar
-        return fn(args[0], src, dst)
-    if op is Op.MAKE:
-        if isinstance(result_type, SpectrumType):
-            raise InterpError("spectrum values are not supported; run lift first")
-        return tuple(args)
-    if op is Op.EXTRACT:
-        return args[0][attrs["index"]]
-    if op is Op.INSERT:
-        i = attrs["index"]
-        agg = args[0]
-        return agg[:i] + (args[1],) + agg[i + 1:]
-    if op is Op.BROADCAST:
-        return _broadcast(args[0], result_type)
-    if op is Op.LANE:
-        return np.int32(0)
-    if op is Op.ANY:
-        return bool(args[0])
-    raise InterpError(f"'{op.value}' is not supported by the interpreter")
+    rule = _PURE.get(op)
+    if rule is None:
+        raise InterpError(f"'{op.value}' is not supported by the interpreter")
+    return rule(result_type, operand_types, args, attrs)
 
 
 # --------------------------------------------------------------------------------------

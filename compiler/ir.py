@@ -304,12 +304,12 @@ class Op(enum.Enum):
     SPEC_MAX = "spec.max"  # max component -> f32
     SPEC_RGB = "spec.from_rgb"  # (r, g, b) f32 -> spectrum; attrs: illuminant, spectrum
     SPEC_TABLE = "spec.table"  # buffer<f32>, i32 offset -> spectrum: a tabulated spectrum
-    # stored there (the generic build's PRM; spectral variants only, see passes/lift.py)
+    # stored there (the generic build's PRM; spectral variants only, see passes/lift/spectral.py)
     SPEC_MAKE = "spec.make"  # one f32 per component (spectral: 4) -> spectrum
     SPEC_SET = "spec.set_wavelengths"  # spectrum: this sample's wavelengths (nm), no result
     SPEC_LAMBDA = "spec.wavelengths"  # -> spectrum: this sample's wavelengths (nm)
     SPEC_SRGB = "spec.to_srgb"  # spectrum -> vec3 linear sRGB
-    # polarization (spectrum = a Mueller matrix in polarized variants; see passes/lift.py)
+    # polarization (spectrum = a Mueller matrix in polarized variants; see passes/lift/mueller.py)
     SPEC_UNPOL = "spec.unpolarized"  # spectrum -> unpolarized: entry [0][0]
     SPEC_FROM = "spec.from_unpolarized"  # unpolarized u -> spectrum u * identity
     SPEC_DEPOL = "spec.depolarizer"  # unpolarized u -> spectrum with only [0][0] = u

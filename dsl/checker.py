@@ -69,7 +69,7 @@ __all__ = [
 ]
 
 
-# `wavelengths`: a spectral build whose kernel sets its wavelengths (compiler/passes/lift.py)
+# `wavelengths`: a spectral build whose kernel sets its wavelengths (compiler/passes/lift/driver.py)
 TRAITS = ("mono", "rgb", "spectral", "polarized", "wavelengths")
 
 PLUGIN_INTERFACES: dict[str, list[tuple[str, list[tuple[str, str]], str]]] = {

@@ -19,6 +19,7 @@ from typing import Any
 import numpy as np
 
 from ..compiler import ir
+from ..compiler.builtins import BUILTINS
 from ..compiler.ir import (
     BOOL,
     F32,
@@ -45,8 +46,6 @@ from .checker import TEXTURE, CheckedProgram, FnInfo, PluginInfo, Symbol
 _ARITH = {"+": Op.ADD, "-": Op.SUB, "*": Op.MUL, "/": Op.DIV, "%": Op.REM}
 _BITS = {"&": Op.AND, "|": Op.OR, "^": Op.XOR, "<<": Op.SHL, ">>": Op.SHR}
 _CMP = {"==": Op.EQ, "!=": Op.NE, "<": Op.LT, "<=": Op.LE, ">": Op.GT, ">=": Op.GE}
-_MATH = {"sqrt": Op.SQRT, "floor": Op.FLOOR, "ceil": Op.CEIL, "abs": Op.ABS, "min": Op.MIN,
-         "max": Op.MAX}
 
 
 def f32(x: float) -> float:
@@ -116,8 +115,9 @@ def _assigned(stmts: list[A.Stmt], out: set[Symbol]) -> set[Symbol]:
 
 def _has_effects(e: Any) -> bool:
     """Whether an expression calls a function or loads memory (no speculation then)."""
-    if isinstance(e, A.Call) and (isinstance(e.target, FnInfo) or e.target in (
-            ("builtin", "trace"), ("builtin", "occluded"))):
+    if isinstance(e, A.Call) and (isinstance(e.target, FnInfo) or (
+            isinstance(e.target, tuple) and e.target[0] == "builtin"
+            and BUILTINS[e.target[1]].effects)):
         return True
     if isinstance(e, A.Index):
         return True
@@ -503,59 +503,5 @@ class _FnLowerer:
                 self.expr(a)
             return self.env[what]
         args = [self.expr(a) for a in e.args]
-        name = what
-        if name == "set_wavelengths":
-            self.b.emit(Op.SPEC_SET, args, [], loc=loc)
-            return None
-        assert t is not None
-        if name in _MATH:
-            return self.op(loc, _MATH[name], t, *args)
-        if name == "select":
-            return self.op(loc, Op.SELECT, t, *args)
-        if name in ("bits", "from_bits"):
-            return self.op(loc, Op.BITCAST, t, args[0])
-        if name in ("Float", "Int", "UInt", "UInt64", "Bool"):
-            return args[0] if args[0].type == t else self.op(loc, Op.CAST, t, args[0])
-        if name == "to_srgb":
-            return self.op(loc, Op.SPEC_SRGB, t, *args)
-        if isinstance(t, (VecType, MatType)):
-            if len(args) == 1 and isinstance(t, VecType):
-                return self.op(loc, Op.BROADCAST, t, args[0])
-            comps: list[Value] = []
-            for a in args:
-                if isinstance(a.type, VecType):
-                    comps += [self.op(loc, Op.EXTRACT, F32, a, index=i) for i in range(a.type.n)]
-                else:
-                    comps.append(a)
-            return self.op(loc, Op.MAKE, t, *comps)
-        if name == "Spectrum" and len(args) == 1 and isinstance(args[0].type, ir.UnpolarizedType):
-            return self.op(loc, Op.SPEC_FROM, t, args[0])
-        if name == "Unpolarized":
-            return self.op(loc, Op.BROADCAST, t, args[0])
-        if name == "unpolarized":
-            return self.op(loc, Op.SPEC_UNPOL, t, args[0])
-        if name == "depolarizer":
-            return self.op(loc, Op.SPEC_DEPOL, t, args[0])
-        if name == "mueller":
-            return self.op(loc, Op.SPEC_MUELLER, t, *args)
-        if name == "mueller_entry":
-            row, col = (int(a.value) for a in e.args[1:])  # type: ignore[attr-defined]
-            return self.op(loc, Op.SPEC_ENTRY, t, args[0], row=row, col=col)
-        if name == "Spectrum":
-            if len(args) == 1:
-                return self.op(loc, Op.BROADCAST, t, args[0])
-            return self.op(loc, Op.SPEC_RGB if len(args) == 3 else Op.SPEC_MAKE, t, *args)
-        if name == "illuminant":
-            return self.op(loc, Op.SPEC_RGB, t, *args, illuminant=True)
-        if name == "wavelengths":
-            return self.op(loc, Op.SPEC_LAMBDA, t)
-
-        if name == "mean":
-            return self.op(loc, Op.SPEC_AVG, F32, args[0])
-        if name == "max_value":
-            return self.op(loc, Op.SPEC_MAX, F32, args[0])
-        if name == "trace":
-            return self.op(loc, Op.INTERSECT, t, *args)
-        if name == "occluded":
-            return self.op(loc, Op.OCCLUDED, BOOL, *args)
-        raise TypeError(name)  # pragma: no cover
+        literals = [a.value if isinstance(a, A.IntLit) else None for a in e.args]
+        return BUILTINS[what].emit(Builder(self.b.block, loc), t, args, literals)

@@ -14,6 +14,7 @@ import llvmlite.ir as L
 import numpy as np
 
 from .. import ir
+from ..builtins import F32_INTRINSICS
 from ..diagnostics import CompileError
 
 F32 = L.FloatType()
@@ -534,9 +535,7 @@ LOWER: dict[ir.Op, Callable[[Lowering, ir.Instr], L.Value | list[L.Value] | None
     ir.Op.SHR: _lower_shift,
     **{op: _lower_cmp for op in ir.CMP_OPS},
     ir.Op.SELECT: _lower_select,
-    ir.Op.SQRT: _unary_intrinsic("sqrt"),
-    ir.Op.FLOOR: _unary_intrinsic("floor"),
-    ir.Op.CEIL: _unary_intrinsic("ceil"),
+    **{op: _unary_intrinsic(i.llvm) for op, i in F32_INTRINSICS.items()},
     ir.Op.ABS: _lower_abs,
     ir.Op.MIN: _lower_minmax,
     ir.Op.MAX: _lower_minmax,

@@ -5,7 +5,7 @@ A constant colour parameter reaches the compiler as a
 spectrum if it gave one, and whether it is emitted light); the compiler upsamples it.  Colours
 the kernels read from buffers (emitter tables, bitmap texels) are stored already encoded:
 linear sRGB in the mono and rgb variants, Jakob & Hanika coefficients in the spectral one
-(see compiler/passes/lift.py), and for emitted light a scale beside them.
+(see compiler/passes/lift/spectral.py), and for emitted light a scale beside them.
 """
 
 from __future__ import annotations
