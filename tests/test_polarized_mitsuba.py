@@ -23,7 +23,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from _bsdf_harness import SceneBsdfs
-from test_polarized import (
+from test_polarized_bsdfs_mitsuba import (
     STOKES_SCENE,
     _block_means,
     _directions,

@@ -33,7 +33,7 @@ from rdsl.runtime.render import (
 from rdsl.runtime.render.film import FILTERS, border_size, filter_radius
 from rdsl.runtime.scene import load_scene_description
 
-CBOX = Path("/work/shared/scenes/cbox/cbox.xml")
+CBOX = Path(__file__).resolve().parents[1].parent / "shared" / "scenes" / "cbox" / "cbox.xml"
 CBOX_REF = CBOX.with_name("cbox_ref_rgb.exr")
 needs_cbox = pytest.mark.skipif(not CBOX.is_file(), reason=f"needs {CBOX}")
 
