@@ -3,18 +3,46 @@ hashes them before deciding whether to compile)."""
 
 from __future__ import annotations
 
+import os
 import re
 from pathlib import Path
+
+from .diagnostics import CompileError
 
 STDLIB = Path(__file__).resolve().parent.parent / "stdlib"
 PRELUDE = ("types", "math")
 
 
-def is_path(source_or_path: str | Path) -> bool:
-    if isinstance(source_or_path, Path):
+def is_path(source_or_path: str | os.PathLike) -> bool:
+    """The one rule for "is this a file or source text?", used by every entry point (``jit``,
+    ``check``, the kernel cache).  A path object is a file.  A string is source text if it
+    holds a newline or is longer than any path; otherwise it is a file if it ends in
+    ``.rdsl`` (so a missing one says it cannot be read rather than failing to parse) or names
+    an existing file."""
+    if isinstance(source_or_path, os.PathLike):
         return True
     s = str(source_or_path)
-    return "\n" not in s and (s.endswith(".rdsl") or Path(s).is_file())
+    if "\n" in s or len(s) >= 4096:
+        return False
+    if s.endswith(".rdsl"):
+        return True
+    try:
+        return Path(s).is_file()
+    except (OSError, ValueError):
+        return False
+
+
+def read_source(source_or_path: str | os.PathLike) -> tuple[str, Path | None]:
+    """The program's text, and its file (None for source text); a file that cannot be read
+    is a diagnostic naming it."""
+    if not is_path(source_or_path):
+        return str(source_or_path), None
+    path = Path(source_or_path)
+    try:
+        return path.read_text(), path
+    except (OSError, UnicodeDecodeError) as e:
+        why = e.strerror if isinstance(e, OSError) and e.strerror else e
+        raise CompileError(f"cannot read `{path}`: {why}") from None
 
 
 def source_files(source_or_path: str | Path) -> list[Path]:

@@ -15,6 +15,7 @@ from pathlib import Path
 
 from ..compiler import ir
 from ..compiler.diagnostics import CompileError
+from ..compiler.sources import read_source
 from . import ast
 from .checker import CheckedProgram, check_program
 from .parser import parse
@@ -23,23 +24,8 @@ __all__ = ["CheckedProgram", "CompileError", "ast", "check", "compile_to_ir", "p
 
 
 def _source(path_or_source: str | Path, filename: str | None) -> tuple[str, str, Path | None]:
-    if isinstance(path_or_source, Path) or (
-            isinstance(path_or_source, str) and "\n" not in path_or_source
-            and len(path_or_source) < 4096 and _is_file(path_or_source)):
-        path = Path(path_or_source)
-        try:
-            text = path.read_text()
-        except (OSError, UnicodeDecodeError) as e:
-            raise CompileError(f"cannot read `{path}`: {e}") from None
-        return text, filename or str(path), path
-    return str(path_or_source), filename or "<string>", None
-
-
-def _is_file(s: str) -> bool:
-    try:
-        return Path(s).is_file()
-    except (OSError, ValueError):
-        return False
+    text, path = read_source(path_or_source)
+    return text, filename or (str(path) if path is not None else "<string>"), path
 
 
 def check(path_or_source: str | Path, filename: str | None = None,

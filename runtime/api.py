@@ -14,6 +14,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from ..compiler.diagnostics import CompileError
+from ..compiler.sources import read_source
 from ..core.color import MODELS, ColorModel
 from .cache import STEM, cache_dir, cache_key, entry_complete
 from .kernel import Kernel
@@ -169,15 +170,7 @@ def load(path: str | os.PathLike, *, from_cache: bool = False,
 
 
 def _source_text(source_or_path: str | os.PathLike) -> str:
-    if isinstance(source_or_path, os.PathLike) or "\n" not in source_or_path and (source_or_path.endswith(".rdsl")
-                                         or Path(source_or_path).is_file()):
-        p = Path(source_or_path)
-    else:
-        return source_or_path
-    try:
-        return p.read_text()
-    except OSError as e:
-        raise CompileError(f"cannot read `{p}`: {e.strerror or e}") from None
+    return read_source(source_or_path)[0]
 
 
 def jit(source_or_path: str | os.PathLike, target: str | Target = "host",
