@@ -3,7 +3,7 @@
 A variant name (``mono``, ``rgb``, ``spectral``, ``mono_polarized``, ``spectral_polarized``)
 is looked up in :data:`MODELS` once, where the user gives it; the compiler and the runtime
 then ask the :class:`ColorModel` (``.spectral``, ``.polarized``, ``.channels``, ...) and never
-read the name again.  The compiler's types for a model live in ``compiler/passes/lift.py``.
+read the name again.  The compiler's types for a model live in ``compiler/passes/lift/model.py``.
 """
 
 from __future__ import annotations

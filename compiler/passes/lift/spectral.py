@@ -11,7 +11,7 @@ is evaluated there.  Colours become spectra as in Mitsuba 3:
   instead, exactly (to float32 rounding) as Mitsuba's ``irregular``: the linear interpolant
   of its knots, 0 outside them (and outside 360..830 nm).  A table of regular cells over its
   range, no wider than its knots' spacing, holds per cell its knot and the lines either side
-  (``runtime/spectral.py``: ``tabulated_cells``); a wavelength's cell gives the knot, the
+  (``core/spectral.py``: ``tabulated_cells``); a wavelength's cell gives the knot, the
   knot the line: three loads, no search.
 * ``spec.table(buf, offset)``, a tabulated spectrum the generic build stores in ``PRM``, is
   evaluated the same way from the fixed 1 nm cells over 360..830 nm stored there
