@@ -13,6 +13,7 @@ import time
 from pathlib import Path
 from typing import Any
 
+from ..compiler.backends.base import ABI_VERSION
 from ..compiler.diagnostics import CompileError
 from .cache import STEM, cache_dir, cache_key, entry_complete
 from .kernel import Kernel
@@ -139,6 +140,10 @@ def load(path: str | os.PathLike, *, from_cache: bool = False,
         manifest["kernels"]
     except (OSError, ValueError, KeyError, TypeError) as e:
         raise CompileError(f"{man}: not a valid rdsl manifest ({e})") from None
+    if manifest.get("abi", 1) != ABI_VERSION:
+        raise CompileError(f"{man}: built by rdsl {manifest.get('rdsl_version', '?')} for C ABI "
+                           f"{manifest.get('abi', 1)}; this rdsl calls ABI {ABI_VERSION} "
+                           "(strided arrays): recompile it")
     try:
         runnable = host_supports(get_target(target))
     except CompileError:

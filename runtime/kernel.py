@@ -83,8 +83,13 @@ class Kernel:
                             if not p["uniform"] or p["type"]["kind"] == "buffer"]
         self._uniform = {p["name"]: p for p in self.params
                          if p["uniform"] and p["type"]["kind"] != "buffer"}
-        argtypes = [ctypes.c_void_p if a["kind"] != "uniform" else _CTYPES[a["dtype"]]
-                    for a in self.args] + [ctypes.c_void_p]
+        self._strided = [bool(a.get("strided")) for a in self.args]
+        argtypes: list[Any] = []
+        for a, strided in zip(self.args, self._strided):
+            argtypes.append(ctypes.c_void_p if a["kind"] != "uniform" else _CTYPES[a["dtype"]])
+            if strided:
+                argtypes.append(ctypes.c_int64)  # the byte stride of the array before it
+        argtypes += [ctypes.c_void_p, ctypes.c_int64]  # the mask and its stride
         self._fn = getattr(lib, info["symbol"])
         self._fn.argtypes = [ctypes.c_int64] + argtypes
         self._fn.restype = None
@@ -151,11 +156,11 @@ class Kernel:
             if arr.dtype.kind not in _KINDS[dtype]:
                 raise self._err(f"parameter `{path}` {want}, got dtype {arr.dtype}")
             if kind == "mat" and arr.ndim == 3 and arr.shape[1:] == (tj["n"], tj["n"]):
-                arr = arr.reshape(arr.shape[0], k)
+                out.extend((path, arr[:, r, c]) for r in range(tj["n"]) for c in range(tj["n"]))
+                return
             if arr.ndim != 2 or arr.shape[1] != k:
                 raise self._err(f"parameter `{path}` {want}, got shape {arr.shape}")
-            for j in range(k):
-                out.append((path, arr[:, j]))
+            out.extend((path, arr[:, j]) for j in range(k))  # strided views, no copies
         elif kind == "struct":
             if not isinstance(value, dict):
                 raise self._err(f"parameter `{path}` expects a dict of fields "
@@ -238,38 +243,49 @@ class Kernel:
         manifest).  Returns a (N,) array, a (N, k) array for vectors, a dict for structs, a
         tuple for tuples, or None.
 
-        ``out``: the result of an earlier call of this kernel over as many elements; the
-        kernel writes into its arrays (lanes outside ``mask`` keep their old values) and
-        returns it.  A loop of calls then reuses its memory instead of faulting in fresh
-        pages on every call.
+        Arrays are read in place, in any layout one stride per axis describes: a C-order
+        ``(N, 3)`` array, a Fortran-order one, slices with steps, fields of a record array at
+        any offset.  Only an array whose dtype is not the kernel's (float64 for a float
+        param, ints for a bool, another byte order) is converted, into a temporary copy.  A
+        Python scalar for a varying param is one value for every element (stride 0).
+
+        ``out``: arrays shaped like the result (the result of an earlier call over as many
+        elements, or arrays of the caller's own, in any layout: a C-order ``(N, 4)`` array,
+        columns of a record array); the kernel writes into them (lanes outside ``mask`` keep
+        their old values) and returns ``out``.  The fastest way to call a kernel in a loop
+        is ``out = k(..., out=out)`` with a result reused from call to call: no fresh pages
+        to fault in.
 
         ``wait=False`` returns a :class:`Pending` at once, while the thread pool runs the
         call: calls queued together share the pool, so one's last tasks overlap the next's
         first (the arrays passed in must not change until ``result()``)."""
         values = self._bind(args, kwargs)
         c_vals: list[Any] = [None] * len(self.args)
+        strides: list[int] = [0] * len(self.args)
         leaves, leaf_slots = self._convert_params(values, c_vals)
         n = self._length(leaves, mask)
-        mask_arr = self._mask_array(mask, n) if mask is not None else None
+        mask_arr = _mask_array(mask) if mask is not None else None
         if n is None:
             n = 1
         keep = []
         for (_path, v), slot in zip(leaves, leaf_slots):
-            dt = self.args[slot]["dtype"]
-            if isinstance(v, np.ndarray):
-                a = v != 0 if dt == "bool" and v.dtype.kind != "b" else v
-                a = np.ascontiguousarray(a, dtype=DTYPES[dt])
-            else:
-                a = np.full(n, v, dtype=DTYPES[dt])
+            a = _leaf_memory(v, self.args[slot]["dtype"])
             keep.append(a)
-            c_vals[slot] = a.ctypes.data
-        out_arrays = self._outputs(out, n, mask is not None, c_vals)
+            c_vals[slot], strides[slot] = a.ctypes.data, a.strides[0]
+        out_arrays = self._outputs(out, n, mask is not None, c_vals, strides)
         for i, a in enumerate(self.args):
             if a["kind"] == "buffer":
                 c_vals[i] = c_vals[i].ctypes.data
-        mask_ptr = mask_arr.ctypes.data if mask_arr is not None else None
-
-        futures = self._run(n, c_vals, mask_ptr, threads)
+        flat: list[Any] = []
+        for v, stride, strided in zip(c_vals, strides, self._strided):
+            flat.append(v)
+            if strided:
+                flat.append(stride)
+        if mask_arr is None:
+            flat += [None, 0]
+        else:
+            flat += [mask_arr.ctypes.data, mask_arr.strides[0]]
+        futures = self._run(n, flat, threads)
         pending = Pending(futures, (keep, mask_arr, c_vals),
                           lambda: out if out is not None else self._results(out_arrays, n))
         return pending if not wait else pending.result()
@@ -345,19 +361,15 @@ class Kernel:
                 raise self._err(f"`mask` has {len(m)} elements, expected {n}")
         return n
 
-    @staticmethod
-    def _mask_array(mask: Any, n: int) -> np.ndarray:
-        m = np.asarray(mask)
-        return np.ascontiguousarray(m != 0 if m.dtype.kind != "b" else m).view(np.uint8)
-
-    def _outputs(self, out: Any, n: int, masked: bool, c_vals: list[Any]) -> dict[str, Any]:
+    def _outputs(self, out: Any, n: int, masked: bool, c_vals: list[Any],
+                 strides: list[int]) -> dict[str, Any]:
         """Point the output arguments at ``out``'s arrays, or at fresh ones (returned by
         name)."""
         outs = [(i, a) for i, a in enumerate(self.args) if a["kind"] == "output"]
         out_arrays: dict[str, Any] = {}
         if out is not None:
             for (i, _), arr in zip(outs, self._out_leaves(out, n)):
-                c_vals[i] = arr.ctypes.data
+                c_vals[i], strides[i] = arr.ctypes.data, arr.strides[0]
             return out_arrays
         # outputs of one dtype are the rows of one block, in result order: a vector
         # result is then a view (no copy), and consecutive leaves are one contiguous array
@@ -371,18 +383,18 @@ class Kernel:
             arr = blk[0][blk[1]]
             blk[1] += 1
             out_arrays[a["name"]] = arr
-            c_vals[i] = arr.ctypes.data
+            c_vals[i], strides[i] = arr.ctypes.data, arr.strides[0]
         return out_arrays
 
-    def _run(self, n: int, c_vals: list[Any], mask_ptr: Any, threads: int | None
-             ) -> list[Future]:
-        """Run over [0, n): on this thread, or as tasks of the thread pool (their futures
-        are returned, not waited for)."""
+    def _run(self, n: int, flat: list[Any], threads: int | None) -> list[Future]:
+        """Run over [0, n) with the entry point's arguments ``flat`` (after ``n``): on this
+        thread, or as tasks of the thread pool (their futures are returned, not waited
+        for)."""
         if n <= 0:
             return []
         threads = (os.cpu_count() or 1) if threads is None else max(1, int(threads))
         if threads == 1 or n < 2 * MIN_CHUNK:
-            self._fn(n, *c_vals, mask_ptr)
+            self._fn(n, *flat)
             return []
         W = max(self.width, 1)
         # tasks of at least MIN_CHUNK elements, as many for every thread: with one task
@@ -392,13 +404,14 @@ class Kernel:
         chunk = -(-math.ceil(n / tasks) // W) * W
         bounds = [(b, min(b + chunk, n)) for b in range(0, n, chunk)]
         pool = _pool(threads)
-        return [pool.submit(self._range, b, e, *c_vals, mask_ptr) for b, e in bounds]
+        return [pool.submit(self._range, b, e, *flat) for b, e in bounds]
 
     def _out_leaves(self, result: Any, n: int) -> list[np.ndarray]:
-        """The arrays of ``result`` (as ``_results`` builds it) for the output arguments, in
-        their order, checked to be writeable contiguous views of ``n`` elements of the right
-        dtype."""
-        bad = self._err(f"`out` is not a result of this kernel over {n} elements")
+        """The arrays of ``result`` (shaped as ``_results`` builds it, any strides) for the
+        output arguments, in their order, checked to be writeable views of ``n`` elements of
+        the right dtype (bools as uint8, as the kernel writes them)."""
+        bad = self._err(f"`out` is not a result of this kernel over {n} elements (nor "
+                        "writeable arrays of its dtypes shaped like one)")
         leaves: list[np.ndarray] = []
 
         def walk(v: Any, t: dict[str, Any]) -> None:
@@ -413,16 +426,16 @@ class Kernel:
                     raise bad
                 for e, et in zip(v, t["elems"]):
                     walk(e, et)
-            elif kind in ("vec", "mat"):
-                a = np.asarray(v)
-                if a.ndim < 2 or a.shape[0] != n:
-                    raise bad
-                cols = a.reshape(n, -1)
-                if not np.may_share_memory(cols, a):
-                    raise bad
-                leaves.extend(cols[:, j] for j in range(cols.shape[1]))
+            elif not isinstance(v, np.ndarray):
+                raise bad
+            elif kind == "vec" and v.shape == (n, t["n"]):
+                leaves.extend(v[:, j] for j in range(t["n"]))
+            elif kind == "mat" and v.shape == (n, t["n"], t["n"]):
+                leaves.extend(v[:, r, c] for r in range(t["n"]) for c in range(t["n"]))
+            elif kind == "scalar" and v.shape == (n,):
+                leaves.append(v)
             else:
-                leaves.append(np.asarray(v))
+                raise bad
 
         tj = self.result.get("type")
         if tj is not None:
@@ -436,10 +449,9 @@ class Kernel:
             if a["kind"] != "output":
                 continue
             leaf = by_name[a["name"]]
-            if leaf.shape != (n,) or leaf.dtype != DTYPES[a["dtype"]] or \
-                    not leaf.flags.c_contiguous or not leaf.flags.writeable:
+            if leaf.dtype != DTYPES[a["dtype"]] or not leaf.flags.writeable:
                 raise bad
-            arrays.append(leaf)
+            arrays.append(leaf.view(np.uint8) if a["dtype"] == "bool" else leaf)
         return arrays
 
     def _results(self, out_arrays: dict[str, np.ndarray], n: int) -> Any:
@@ -482,6 +494,31 @@ def _columns(cols: list[np.ndarray], n: int) -> np.ndarray:
         row0 = (first.ctypes.data - base.ctypes.data) // step
         return base[row0:row0 + len(cols)].T
     return np.stack(cols, axis=1)
+
+
+def _leaf_memory(v: Any, dtype: str) -> np.ndarray:
+    """The 1-D array the kernel reads a varying leaf from (its stride is the call's): the
+    array itself when its dtype is the kernel's, whatever its strides (no copy); a converted
+    copy when the dtype differs (float64 for f32, ints for bool, another byte order); one
+    element read with stride 0 for a scalar.  Bools are passed as their bytes (uint8)."""
+    want = DTYPES[dtype]
+    if not isinstance(v, np.ndarray):
+        a = np.full(1, v, dtype=want)
+        a = np.lib.stride_tricks.as_strided(a, shape=(1,), strides=(0,))
+    elif v.dtype == want:
+        a = v
+    elif dtype == "bool" and v.dtype.kind != "b":
+        a = v != 0
+    else:
+        a = v.astype(want)
+    return a.view(np.uint8) if dtype == "bool" else a
+
+
+def _mask_array(mask: Any) -> np.ndarray:
+    """The mask as the kernel reads it: a uint8 view of a bool array (any strides), else a
+    converted copy (nonzero = active)."""
+    m = np.asarray(mask)
+    return (m if m.dtype.kind == "b" else m != 0).view(np.uint8)
 
 
 def _c_scalar(v: Any, dtype: str) -> Any:
