@@ -16,6 +16,8 @@ from typing import Any
 
 import numpy as np
 
+from .out_pool import OutputPool
+
 DTYPES = {"f32": np.dtype(np.float32), "i32": np.dtype(np.int32),
           "u32": np.dtype(np.uint32), "u64": np.dtype(np.uint64), "bool": np.dtype(np.bool_)}
 _C_DTYPES = {**DTYPES, "bool": np.dtype(np.uint8)}  # how each dtype is laid out in C
@@ -83,6 +85,7 @@ class Kernel:
                             if not p["uniform"] or p["type"]["kind"] == "buffer"]
         self._uniform = {p["name"]: p for p in self.params
                          if p["uniform"] and p["type"]["kind"] != "buffer"}
+        self.pool = OutputPool()  # fresh outputs' blocks, reused once no result holds them
         self._strided = [bool(a.get("strided")) for a in self.args]
         argtypes: list[Any] = []
         for a, strided in zip(self.args, self._strided):
@@ -252,9 +255,11 @@ class Kernel:
         ``out``: arrays shaped like the result (the result of an earlier call over as many
         elements, or arrays of the caller's own, in any layout: a C-order ``(N, 4)`` array,
         columns of a record array); the kernel writes into them (lanes outside ``mask`` keep
-        their old values) and returns ``out``.  The fastest way to call a kernel in a loop
-        is ``out = k(..., out=out)`` with a result reused from call to call: no fresh pages
-        to fault in.
+        their old values) and returns ``out``.  Without ``out``, large results are written
+        into blocks of ``self.pool`` (see :mod:`rdsl.runtime.out_pool`), which reuses a
+        block once no array of an earlier result refers to it: ``r = k(x)`` in a loop
+        faults in no fresh pages after the second call.  The fastest loop passes the same
+        ``out`` every time (no allocation at all, nothing retained by the pool).
 
         ``wait=False`` returns a :class:`Pending` at once, while the thread pool runs the
         call: calls queued together share the pool, so one's last tasks overlap the next's
@@ -372,12 +377,12 @@ class Kernel:
                 c_vals[i], strides[i] = arr.ctypes.data, arr.strides[0]
             return out_arrays
         # outputs of one dtype are the rows of one block, in result order: a vector
-        # result is then a view (no copy), and consecutive leaves are one contiguous array
-        alloc = np.zeros if masked else np.empty
+        # result is then a view (no copy), and consecutive leaves are one contiguous array;
+        # a masked call's lanes outside the mask are 0
         blocks = {}
         for dt in dict.fromkeys(a["dtype"] for _, a in outs):
             count = sum(1 for _, a in outs if a["dtype"] == dt)
-            blocks[dt] = [alloc((count, n), dtype=_C_DTYPES[dt]), 0]
+            blocks[dt] = [self.pool.block((count, n), _C_DTYPES[dt], zero=masked), 0]
         for i, a in outs:
             blk = blocks[a["dtype"]]
             arr = blk[0][blk[1]]
@@ -413,33 +418,9 @@ class Kernel:
         bad = self._err(f"`out` is not a result of this kernel over {n} elements (nor "
                         "writeable arrays of its dtypes shaped like one)")
         leaves: list[np.ndarray] = []
-
-        def walk(v: Any, t: dict[str, Any]) -> None:
-            kind = t["kind"]
-            if kind == "struct":
-                if not isinstance(v, dict):
-                    raise bad
-                for f, ft in t["fields"]:
-                    walk(v[f], ft)
-            elif kind == "tuple":
-                if not isinstance(v, tuple) or len(v) != len(t["elems"]):
-                    raise bad
-                for e, et in zip(v, t["elems"]):
-                    walk(e, et)
-            elif not isinstance(v, np.ndarray):
-                raise bad
-            elif kind == "vec" and v.shape == (n, t["n"]):
-                leaves.extend(v[:, j] for j in range(t["n"]))
-            elif kind == "mat" and v.shape == (n, t["n"], t["n"]):
-                leaves.extend(v[:, r, c] for r in range(t["n"]) for c in range(t["n"]))
-            elif kind == "scalar" and v.shape == (n,):
-                leaves.append(v)
-            else:
-                raise bad
-
         tj = self.result.get("type")
-        if tj is not None:
-            walk(result, tj)
+        if tj is not None and not _out_walk(result, tj, n, leaves):
+            raise bad
         names = self.result["leaves"]
         if len(leaves) != len(names):
             raise bad
@@ -458,28 +439,51 @@ class Kernel:
         tj = self.result.get("type")
         if tj is None:
             return None
-        leaves = iter(self.result["leaves"])
+        arrays = iter([out_arrays[name] for name in self.result["leaves"]])
+        return _build(tj, arrays, n)
 
-        def take(dtype: str) -> np.ndarray:
-            arr = out_arrays[next(leaves)]
-            return arr.view(np.bool_) if dtype == "bool" else arr
 
-        def build(t: dict[str, Any]) -> Any:
-            kind = t["kind"]
-            if kind == "scalar":
-                return take(t["dtype"])
-            if kind in ("vec", "mat"):
-                k = t["n"] if kind == "vec" else t["n"] * t["n"]
-                cols = [take(t["dtype"]) for _ in range(k)]
-                out = _columns(cols, n)
-                return out.reshape(n, t["n"], t["n"]) if kind == "mat" else out
-            if kind == "struct":
-                return {f: build(ft) for f, ft in t["fields"]}
-            if kind == "tuple":
-                return tuple(build(e) for e in t["elems"])
-            raise TypeError(t)
+def _build(t: dict[str, Any], arrays: Any, n: int) -> Any:
+    """The result of type ``t`` from the output ``arrays`` (an iterator, in leaf order).
+    A plain function, not a recursive closure: a closure's cycle would keep the arrays
+    alive until the garbage collector runs, and the output pool could not reuse them."""
+    kind = t["kind"]
+    if kind == "scalar":
+        arr = next(arrays)
+        return arr.view(np.bool_) if t["dtype"] == "bool" else arr
+    if kind in ("vec", "mat"):
+        k = t["n"] if kind == "vec" else t["n"] * t["n"]
+        out = _columns([next(arrays) for _ in range(k)], n)
+        return out.reshape(n, t["n"], t["n"]) if kind == "mat" else out
+    if kind == "struct":
+        return {f: _build(ft, arrays, n) for f, ft in t["fields"]}
+    if kind == "tuple":
+        return tuple(_build(e, arrays, n) for e in t["elems"])
+    raise TypeError(t)
 
-        return build(tj)
+
+def _out_walk(v: Any, t: dict[str, Any], n: int, leaves: list[np.ndarray]) -> bool:
+    """Append the leaf arrays of ``v``, an ``out=`` of type ``t`` over ``n`` elements, to
+    ``leaves`` (views, any strides); False where it is not shaped like one."""
+    kind = t["kind"]
+    if kind == "struct":
+        return isinstance(v, dict) and all(f in v and _out_walk(v[f], ft, n, leaves)
+                                           for f, ft in t["fields"])
+    if kind == "tuple":
+        return isinstance(v, tuple) and len(v) == len(t["elems"]) and \
+            all(_out_walk(e, et, n, leaves) for e, et in zip(v, t["elems"]))
+    if not isinstance(v, np.ndarray):
+        return False
+    k = t.get("n", 0)
+    if kind == "vec" and v.shape == (n, k):
+        leaves.extend(v[:, j] for j in range(k))
+    elif kind == "mat" and v.shape == (n, k, k):
+        leaves.extend(v[:, r, c] for r in range(k) for c in range(k))
+    elif kind == "scalar" and v.shape == (n,):
+        leaves.append(v)
+    else:
+        return False
+    return True
 
 
 def _columns(cols: list[np.ndarray], n: int) -> np.ndarray:

@@ -2,20 +2,28 @@
 
 An entry point receives every array as a base pointer and a byte stride (ABI 2, see
 :mod:`rdsl.compiler.backends.base`): element i is at ``base + i * stride``.  Once per call,
-:meth:`ArrayAccess.prepare` classifies each array; every vector access then branches on that
-(always the same way within a call, so the branch predicts perfectly) between
+:meth:`ArrayAccess.prepare` classifies each array, and each access is emitted one of three
+ways (``how``):
 
-* the contiguous access (stride == element size, base aligned to it): plain vector loads
-  and stores, masked ones in the tail, exactly as for contiguous arrays alone;
-* for strides of 2, 3 or 4 elements (the columns of C-order ``(N, 2)``, ``(N, 3)``,
-  ``(N, 4)`` arrays): one wide load of the W elements' span and a shuffle, and a masked
-  store of the interleaved vector that writes only the array's own elements;
-* any other stride (record fields, negative steps, stride 0): gathers and scatters with
-  32-bit lane offsets, or 64-bit ones when ``(W - 1) * |stride|`` does not fit.
+* ``contiguous``: the array is known to be contiguous and aligned to its element size (the
+  entry point checked every array first): plain vector loads and stores, masked ones in the
+  tail.  This is the loop contiguous callers run, the same code as before strides existed.
+* ``strided`` (full vectors without a user mask): a branch on the array's layout, always
+  the same way within a call, between the contiguous access; for strides of 2, 3 or 4
+  elements (columns of C-order ``(N, 2)``, ``(N, 3)``, ``(N, 4)`` arrays) one wide load of
+  the vectors' span and a shuffle, or a masked store of the interleaved vector that writes
+  only the array's own elements; and for any other stride (record fields, negative steps,
+  stride 0) gathers and scatters.
+* ``any`` (the user-mask loop and the tail): the contiguous access or gathers and scatters.
 
-Measured on the GGX benchmark (4M samples, one thread, C-order ``(N, 3)``/``(N, 2)`` inputs):
-the wide load and shuffle is within about 2% of contiguous arrays on AVX-512 and 5% on AVX2,
-where gathers cost 4% and 14%; per-lane loads and inserts were slower than gathers on both.
+Measured on ``bench/ggx_kernel.rdsl`` (4M samples, one thread, median CPU time on a loaded
+2-core AVX-512 machine), C-order ``(N, 3)``/``(N, 2)`` inputs against one contiguous array
+per component, AVX-512 / AVX2: wide loads and shuffles +4% / +13%, gathers +6% / +23%;
+writing a C-order ``(N, 4)`` ``out=`` as well: wide masked stores +14% / +21%, scatters
++34% / +36%.  In earlier runs per-lane loads and inserts were 37% slower than gathers on
+AVX-512 (equal on AVX2), and gathers with 32-bit lane offsets 5% faster than 64-bit ones on
+AVX-512 only; just the 64-bit form is kept (no range check, less code to compile).
+Branching per access inside the contiguous loop cost AVX2 about 10%, hence its own loop.
 Loads and stores of strided arrays assume no alignment (align 1).
 """
 
@@ -39,9 +47,7 @@ class StridedArray:
         self.dtype, self.ptr, self.stride = dtype, ptr, stride
         self.contiguous: L.Value | None = None  # i1: stride == size, base aligned
         self.factor: dict[int, L.Value] = {}  # k -> i1: stride == k * size
-        self.narrow: L.Value | None = None  # i1: the lanes' offsets fit in i32
-        self.offsets32: L.Value | None = None  # <W x i32>: lane * stride
-        self.offsets64: L.Value | None = None  # <W x i64>: lane * stride
+        self.offsets: L.Value | None = None  # <W x i64>: lane * stride
 
 
 class ArrayAccess:
@@ -65,13 +71,8 @@ class ArrayAccess:
         arr.contiguous = ok
         arr.factor = {k: b.icmp_signed("==", arr.stride, const(I64, k * size))
                       for k in SHUFFLE_FACTORS}
-        limit = (2 ** 31 - 1) // (W - 1)
-        arr.narrow = b.icmp_unsigned("<=", b.add(arr.stride, const(I64, limit)),
-                                     const(I64, 2 * limit))
-        lanes32 = L.Constant(L.VectorType(I32, W), [L.Constant(I32, k) for k in range(W)])
-        lanes64 = L.Constant(L.VectorType(I64, W), [L.Constant(I64, k) for k in range(W)])
-        arr.offsets32 = b.mul(lanes32, self.ml.splat(b, b.trunc(arr.stride, I32), W))
-        arr.offsets64 = b.mul(lanes64, self.ml.splat(b, arr.stride, W))
+        lanes = L.Constant(L.VectorType(I64, W), [L.Constant(I64, k) for k in range(W)])
+        arr.offsets = b.mul(lanes, self.ml.splat(b, arr.stride, W))
 
     # -- helpers -------------------------------------------------------------------------
     def vec_ty(self, dtype: str) -> L.Type:
@@ -81,9 +82,9 @@ class ArrayAccess:
         """The address of element i."""
         return self.b.gep(arr.ptr, [self.b.mul(i, arr.stride)], source_etype=I8)
 
-    def lane_ptrs(self, arr: StridedArray, i: L.Value, offsets: L.Value) -> L.Value:
+    def lane_ptrs(self, arr: StridedArray, i: L.Value) -> L.Value:
         """The addresses of elements i .. i + W - 1."""
-        g = self.b.gep(self.element(arr, i), [offsets], source_etype=I8)
+        g = self.b.gep(self.element(arr, i), [arr.offsets], source_etype=I8)
         g.type = L.VectorType(PTR, self.W)  # llvmlite assumes a scalar result
         return g
 
@@ -127,9 +128,12 @@ class ArrayAccess:
         return self.b.call(self.ml.intrinsic(name, ret, [a.type for a in args]), args)
 
     # -- loads ---------------------------------------------------------------------------
-    def load(self, arr: StridedArray, i: L.Value, lanes: L.Value | None) -> L.Value:
+    def load(self, arr: StridedArray, i: L.Value, lanes: L.Value | None, how: str
+             ) -> L.Value:
         """Elements i .. i + W - 1 of ``arr`` as a vector in memory layout; ``lanes``: the
-        tail's lane mask (the other lanes are not read), None for a full vector."""
+        tail's lane mask (the other lanes are not read), None for a full vector.  ``how``:
+        "contiguous" (known to be), "strided" (a branch between the contiguous access, wide
+        loads and gathers) or "any" (between the contiguous access and gathers)."""
         b, ty, size = self.b, self.vec_ty(arr.dtype), ALIGN[arr.dtype]
         if self.W == 1:
             return b.load(self.element(arr, i), typ=ty, align=1)
@@ -142,14 +146,17 @@ class ArrayAccess:
                                   [p, const(I32, size), lanes, const(ty, 0)])
 
         def strided() -> L.Value:
-            if lanes is not None:
-                return self.gather(arr, i, lanes)
+            if lanes is not None or how == "any":
+                return self.gather(arr, i, lanes if lanes is not None
+                                   else const(self.mask_ty, 1))
             # the wide load reads up to element i + W's address: only when that exists
             more = b.icmp_signed("<", b.add(i, const(I64, self.W)), self.end)
             return self.by_factor(arr, lambda k: b.and_(arr.factor[k], more),
                                   lambda k: self.wide_load(arr, i, k),
                                   lambda: self.gather(arr, i, const(self.mask_ty, 1)))
 
+        if how == "contiguous":
+            return contiguous()
         return self.branch(arr.contiguous, contiguous, strided)
 
     def wide_load(self, arr: StridedArray, i: L.Value, k: int) -> L.Value:
@@ -163,20 +170,16 @@ class ArrayAccess:
 
     def gather(self, arr: StridedArray, i: L.Value, lanes: L.Value) -> L.Value:
         ty = self.vec_ty(arr.dtype)
-
-        def one(offsets: L.Value) -> Callable[[], L.Value]:
-            def emit() -> L.Value:
-                ptrs = self.lane_ptrs(arr, i, offsets)
-                return self.intrinsic(f"llvm.masked.gather.{mangle(ty)}.{mangle(ptrs.type)}",
-                                      ty, [ptrs, const(I32, 1), lanes, const(ty, 0)])
-            return emit
-
-        return self.branch(arr.narrow, one(arr.offsets32), one(arr.offsets64))
+        ptrs = self.lane_ptrs(arr, i)
+        return self.intrinsic(f"llvm.masked.gather.{mangle(ty)}.{mangle(ptrs.type)}", ty,
+                              [ptrs, const(I32, 1), lanes, const(ty, 0)])
 
     # -- stores --------------------------------------------------------------------------
-    def store(self, arr: StridedArray, i: L.Value, v: L.Value, mask: L.Value | None) -> None:
+    def store(self, arr: StridedArray, i: L.Value, v: L.Value, mask: L.Value | None,
+              how: str) -> None:
         """Store the vector ``v`` (memory layout) at elements i .. i + W - 1 of ``arr`` on
-        the lanes of ``mask`` (None: every lane); other lanes' memory is not written."""
+        the lanes of ``mask`` (None: every lane); other lanes' memory is not written.
+        ``how`` as for :meth:`load` (wide stores in place of wide loads)."""
         b, size = self.b, ALIGN[arr.dtype]
         if self.W == 1:
             p = self.element(arr, i)
@@ -197,11 +200,17 @@ class ArrayAccess:
 
         def strided() -> None:
             m = mask if mask is not None else const(self.mask_ty, 1)
+            if how == "any":
+                self.scatter(arr, i, v, m)
+                return
             self.by_factor(arr, lambda k: arr.factor[k],
                            lambda k: self.wide_store(arr, i, v, m, k),
                            lambda: self.scatter(arr, i, v, m))
 
-        self.branch(arr.contiguous, contiguous, strided)
+        if how == "contiguous":
+            contiguous()
+        else:
+            self.branch(arr.contiguous, contiguous, strided)
 
     def wide_store(self, arr: StridedArray, i: L.Value, v: L.Value, m: L.Value,
                    k: int) -> None:
@@ -217,11 +226,6 @@ class ArrayAccess:
                        [wv, self.element(arr, i), const(I32, 1), wm])
 
     def scatter(self, arr: StridedArray, i: L.Value, v: L.Value, m: L.Value) -> None:
-        def one(offsets: L.Value) -> Callable[[], None]:
-            def emit() -> None:
-                ptrs = self.lane_ptrs(arr, i, offsets)
-                self.intrinsic(f"llvm.masked.scatter.{mangle(v.type)}.{mangle(ptrs.type)}",
-                               L.VoidType(), [v, ptrs, const(I32, 1), m])
-            return emit
-
-        self.branch(arr.narrow, one(arr.offsets32), one(arr.offsets64))
+        ptrs = self.lane_ptrs(arr, i)
+        self.intrinsic(f"llvm.masked.scatter.{mangle(v.type)}.{mangle(ptrs.type)}",
+                       L.VoidType(), [v, ptrs, const(I32, 1), m])

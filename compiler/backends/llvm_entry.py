@@ -104,58 +104,85 @@ class _RangeLoop:
         self.full_end = b.add(self.begin, b.and_(count, const(I64, ~(W - 1))))
         self.has_mask = b.icmp_unsigned("!=", self.user_mask.ptr, L.Constant(PTR, None))
         tail_bb = self.rng.append_basic_block("tail")
-        loop_a = self.rng.append_basic_block("all.head")
         loop_m = self.rng.append_basic_block("masked.head")
-        b.cbranch(self.has_mask, loop_m, loop_a)
         entry = b.block
-        # full vectors, no user mask / with user mask
-        for head, masked in ((loop_a, False), (loop_m, True)):
-            self.full_loop(entry, head, masked, tail_bb)
-        # the tail: fewer than W elements, masked loads and stores
+        if W == 1:  # one element per step: its address is all a stride changes
+            loop_a = self.rng.append_basic_block("all.head")
+            self.full_loop(entry, loop_a, False, tail_bb, "contiguous")
+        else:
+            loop_a = self.pick_all_loop(tail_bb)
+        b.position_at_end(entry)
+        b.cbranch(self.has_mask, loop_m, loop_a)
+        # full vectors with the user mask, any layout
+        self.full_loop(entry, loop_m, True, tail_bb, "any")
         b.position_at_end(tail_bb)
         if W == 1:
             b.ret_void()
             return
+        # the tail: fewer than W elements, masked loads and stores
         self.tail()
 
-    def load_in(self, a: CArg, arr: StridedArray, i: L.Value, lanes: L.Value | None
-                ) -> L.Value:
+    def pick_all_loop(self, tail_bb: L.Block) -> L.Block:
+        """The loop over full vectors without a user mask, in two copies: plain vector loads
+        and stores when every array is contiguous (no branch per access: measurably faster
+        on AVX2), else accesses that branch on each array's layout."""
+        b = self.b
+        pick = self.rng.append_basic_block("all.pick")
+        fast = self.rng.append_basic_block("all.head")
+        strided = self.rng.append_basic_block("strided.head")
+        b.position_at_end(pick)
+        every = [arr.contiguous for arr in self.arrays.values()]
+        ok = every[0] if every else const(L.IntType(1), 1)
+        for c in every[1:]:
+            ok = b.and_(ok, c)
+        b.cbranch(ok, fast, strided)
+        self.full_loop(pick, fast, False, tail_bb, "contiguous")
+        self.full_loop(pick, strided, False, tail_bb, "strided")
+        return pick
+
+    def load_in(self, a: CArg, arr: StridedArray, i: L.Value, lanes: L.Value | None,
+                how: str) -> L.Value:
         """Load W elements of a varying input starting at i (lanes: tail mask or None)."""
-        v = self.mem.load(arr, i, lanes)
+        v = self.mem.load(arr, i, lanes, how)
         if a.dtype == "bool":
             v = self.b.icmp_unsigned("!=", v, const(v.type, 0))
         return v
 
-    def call_body(self, i: L.Value, exec_mask: L.Value, lanes: L.Value | None) -> list:
-        vals = [self.load_in(a, self.arrays[k], i, lanes) if a.kind == "varying" else u
+    def call_body(self, i: L.Value, exec_mask: L.Value, lanes: L.Value | None,
+                  how: str) -> list:
+        vals = [self.load_in(a, self.arrays[k], i, lanes, how) if a.kind == "varying" else u
                 for k, (a, u) in enumerate(zip(self.ins_args, self.uniforms))]
         res = self.b.call(self.body, vals + [exec_mask])
         return [self.b.extract_value(res, k) for k in range(len(self.outs))]
 
-    def store_outs(self, i: L.Value, results: list, store_mask: L.Value | None) -> None:
+    def store_outs(self, i: L.Value, results: list, store_mask: L.Value | None,
+                   how: str) -> None:
         b, W = self.b, self.W
         for a, arr, v in zip(self.outs, self.out_arrays, results):
             if a.dtype == "bool":
                 v = b.zext(v, with_elem(v.type, I8))
             if W > 1 and not isinstance(v.type, L.VectorType):
                 v = self.ml.splat(b, v, W)
-            self.mem.store(arr, i, v, store_mask)
+            self.mem.store(arr, i, v, store_mask, how)
 
     def load_user_mask(self, i: L.Value, lanes: L.Value | None) -> L.Value:
-        m = self.mem.load(self.user_mask, i, lanes)
+        m = self.mem.load(self.user_mask, i, lanes, "any")
         return self.b.icmp_unsigned("!=", m, const(m.type, 0))
 
-    def full_loop(self, entry: L.Block, head: L.Block, masked: bool, tail_bb: L.Block) -> None:
+    def full_loop(self, entry: L.Block, head: L.Block, masked: bool, tail_bb: L.Block,
+                  how: str) -> None:
+        """The loop over full vectors from ``begin``, entered from ``entry``; ``how`` the
+        arrays are reached (see :meth:`ArrayAccess.load`)."""
         b = self.b
         b.position_at_end(head)
         i = b.phi(I64, name="i")
         i.add_incoming(self.begin, entry)
-        body_bb = self.rng.append_basic_block(("masked" if masked else "all") + ".body")
+        body_bb = self.rng.append_basic_block(head.name.replace("head", "body"))
         b.cbranch(b.icmp_signed("<", i, self.full_end), body_bb, tail_bb)
         b.position_at_end(body_bb)
         um = self.load_user_mask(i, None) if masked else None
-        results = self.call_body(i, um if masked else const(self.mask_ty, 1), None)
-        self.store_outs(i, results, um)
+        results = self.call_body(i, um if masked else const(self.mask_ty, 1), None, how)
+        self.store_outs(i, results, um, how)
         i.add_incoming(b.add(i, const(I64, self.W)), b.block)
         b.branch(head)
 
@@ -182,6 +209,6 @@ class _RangeLoop:
         exec_mask = b.phi(self.mask_ty)
         exec_mask.add_incoming(lanes, pre)
         exec_mask.add_incoming(um, with_m_end)
-        results = self.call_body(full_end, exec_mask, lanes)
-        self.store_outs(full_end, results, exec_mask)
+        results = self.call_body(full_end, exec_mask, lanes, "any")
+        self.store_outs(full_end, results, exec_mask, "any")
         b.branch(done)
