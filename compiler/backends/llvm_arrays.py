@@ -7,14 +7,15 @@ ways (``how``):
 
 * ``contiguous``: the array is known to be contiguous and aligned to its element size (the
   entry point checked every array first): plain vector loads and stores, masked ones in the
-  tail.  This is the loop contiguous callers run, the same code as before strides existed.
-* ``strided`` (full vectors without a user mask): a branch on the array's layout, always
-  the same way within a call, between the contiguous access; for strides of 2, 3 or 4
-  elements (columns of C-order ``(N, 2)``, ``(N, 3)``, ``(N, 4)`` arrays) one wide load of
-  the vectors' span and a shuffle, or a masked store of the interleaved vector that writes
-  only the array's own elements; and for any other stride (record fields, negative steps,
-  stride 0) gathers and scatters.
-* ``any`` (the user-mask loop and the tail): the contiguous access or gathers and scatters.
+  tail or under a user mask.  The loops contiguous callers run: the same code as before
+  strides existed.
+* ``strided`` (the loop over full vectors when some array is not contiguous): a branch on
+  the array's layout, always the same way within a call, between the contiguous access;
+  for strides of 2, 3 or 4 elements (columns of C-order ``(N, 2)``, ``(N, 3)``, ``(N, 4)``
+  arrays) one wide load of the vectors' span and a shuffle, or a masked store of the
+  interleaved vector that writes only the array's own elements; and for any other stride
+  (record fields, negative steps, stride 0) gathers and scatters.
+* ``any`` (the tail): the contiguous access or gathers and scatters.
 
 Measured on ``bench/ggx_kernel.rdsl`` (4M samples, one thread, median CPU time on a loaded
 2-core AVX-512 machine), C-order ``(N, 3)``/``(N, 2)`` inputs against one contiguous array
@@ -23,7 +24,7 @@ writing a C-order ``(N, 4)`` ``out=`` as well: wide masked stores +14% / +21%, s
 +34% / +36%.  In earlier runs per-lane loads and inserts were 37% slower than gathers on
 AVX-512 (equal on AVX2), and gathers with 32-bit lane offsets 5% faster than 64-bit ones on
 AVX-512 only; just the 64-bit form is kept (no range check, less code to compile).
-Branching per access inside the contiguous loop cost AVX2 about 10%, hence its own loop.
+Branching per access inside the contiguous loops cost AVX2 10 to 16%, hence their own copy.
 Loads and stores of strided arrays assume no alignment (align 1).
 """
 
@@ -176,10 +177,12 @@ class ArrayAccess:
 
     # -- stores --------------------------------------------------------------------------
     def store(self, arr: StridedArray, i: L.Value, v: L.Value, mask: L.Value | None,
-              how: str) -> None:
+              how: str, masked: L.Value | None = None) -> None:
         """Store the vector ``v`` (memory layout) at elements i .. i + W - 1 of ``arr`` on
         the lanes of ``mask`` (None: every lane); other lanes' memory is not written.
-        ``how`` as for :meth:`load` (wide stores in place of wide loads)."""
+        ``how`` as for :meth:`load` (wide stores in place of wide loads).  ``masked``: an
+        i1 saying whether ``mask`` may have inactive lanes; where it does not, a contiguous
+        array takes a plain store (a masked one is slow on AVX2 and without AVX)."""
         b, size = self.b, ALIGN[arr.dtype]
         if self.W == 1:
             p = self.element(arr, i)
@@ -190,13 +193,21 @@ class ArrayAccess:
                     b.store(v, p, align=1)
             return
 
-        def contiguous() -> None:
+        def plain() -> None:
+            b.store(v, b.gep(arr.ptr, [i], source_etype=MEM[arr.dtype]), align=size)
+
+        def under_mask() -> None:
             p = b.gep(arr.ptr, [i], source_etype=MEM[arr.dtype])
+            self.intrinsic(f"llvm.masked.store.{mangle(v.type)}.p0", L.VoidType(),
+                           [v, p, const(I32, size), mask])
+
+        def contiguous() -> None:
             if mask is None:
-                b.store(v, p, align=size)
+                plain()
+            elif masked is None:
+                under_mask()
             else:
-                self.intrinsic(f"llvm.masked.store.{mangle(v.type)}.p0", L.VoidType(),
-                               [v, p, const(I32, size), mask])
+                self.branch(masked, under_mask, plain)
 
         def strided() -> None:
             m = mask if mask is not None else const(self.mask_ty, 1)

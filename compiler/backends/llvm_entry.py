@@ -60,8 +60,9 @@ def _range_fn(ml: Any, rng: L.Function, body: L.Function, args: list[CArg]) -> N
 
 class _RangeLoop:
     """Builds the body of ``rdsl_<name>_range``: its arguments, the loads and stores of one
-    vector of elements (through :class:`ArrayAccess`, for any strides), and the three loops
-    (all lanes, user mask, tail)."""
+    vector of elements (through :class:`ArrayAccess`, for any strides), and four loops: over
+    full vectors of contiguous arrays with every lane active or under the user's mask, over
+    full vectors of strided arrays (either), and the tail."""
 
     def __init__(self, ml: Any, rng: L.Function, body: L.Function, args: list[CArg]) -> None:
         self.ml, self.rng, self.body, self.W = ml, rng, body, ml.width
@@ -104,17 +105,20 @@ class _RangeLoop:
         self.full_end = b.add(self.begin, b.and_(count, const(I64, ~(W - 1))))
         self.has_mask = b.icmp_unsigned("!=", self.user_mask.ptr, L.Constant(PTR, None))
         tail_bb = self.rng.append_basic_block("tail")
+        fast = self.rng.append_basic_block("contiguous")
+        loop_a = self.rng.append_basic_block("all.head")
         loop_m = self.rng.append_basic_block("masked.head")
-        entry = b.block
         if W == 1:  # one element per step: its address is all a stride changes
-            loop_a = self.rng.append_basic_block("all.head")
-            self.full_loop(entry, loop_a, False, tail_bb, "contiguous")
+            b.branch(fast)
         else:
-            loop_a = self.pick_all_loop(tail_bb)
-        b.position_at_end(entry)
+            loop_s = self.rng.append_basic_block("strided.head")
+            b.cbranch(self.all_contiguous(), fast, loop_s)
+            self.full_loop(b.block, loop_s, "either", tail_bb, "strided")
+        b.position_at_end(fast)
         b.cbranch(self.has_mask, loop_m, loop_a)
-        # full vectors with the user mask, any layout
-        self.full_loop(entry, loop_m, True, tail_bb, "any")
+        # full vectors of contiguous arrays, without and with a user mask
+        self.full_loop(fast, loop_a, "all", tail_bb, "contiguous")
+        self.full_loop(fast, loop_m, "masked", tail_bb, "contiguous")
         b.position_at_end(tail_bb)
         if W == 1:
             b.ret_void()
@@ -122,23 +126,14 @@ class _RangeLoop:
         # the tail: fewer than W elements, masked loads and stores
         self.tail()
 
-    def pick_all_loop(self, tail_bb: L.Block) -> L.Block:
-        """The loop over full vectors without a user mask, in two copies: plain vector loads
-        and stores when every array is contiguous (no branch per access: measurably faster
-        on AVX2), else accesses that branch on each array's layout."""
+    def all_contiguous(self) -> L.Value:
+        """i1: every array (the mask too, when given) is contiguous and aligned.  Such calls
+        run loops with plain accesses only: a branch per access costs AVX2 up to 16%."""
         b = self.b
-        pick = self.rng.append_basic_block("all.pick")
-        fast = self.rng.append_basic_block("all.head")
-        strided = self.rng.append_basic_block("strided.head")
-        b.position_at_end(pick)
-        every = [arr.contiguous for arr in self.arrays.values()]
-        ok = every[0] if every else const(L.IntType(1), 1)
-        for c in every[1:]:
-            ok = b.and_(ok, c)
-        b.cbranch(ok, fast, strided)
-        self.full_loop(pick, fast, False, tail_bb, "contiguous")
-        self.full_loop(pick, strided, False, tail_bb, "strided")
-        return pick
+        ok = b.or_(b.not_(self.has_mask), self.user_mask.contiguous)
+        for arr in self.arrays.values():
+            ok = b.and_(ok, arr.contiguous)
+        return ok
 
     def load_in(self, a: CArg, arr: StridedArray, i: L.Value, lanes: L.Value | None,
                 how: str) -> L.Value:
@@ -156,23 +151,25 @@ class _RangeLoop:
         return [self.b.extract_value(res, k) for k in range(len(self.outs))]
 
     def store_outs(self, i: L.Value, results: list, store_mask: L.Value | None,
-                   how: str) -> None:
+                   how: str, masked: L.Value | None = None) -> None:
         b, W = self.b, self.W
         for a, arr, v in zip(self.outs, self.out_arrays, results):
             if a.dtype == "bool":
                 v = b.zext(v, with_elem(v.type, I8))
             if W > 1 and not isinstance(v.type, L.VectorType):
                 v = self.ml.splat(b, v, W)
-            self.mem.store(arr, i, v, store_mask, how)
+            self.mem.store(arr, i, v, store_mask, how, masked)
 
-    def load_user_mask(self, i: L.Value, lanes: L.Value | None) -> L.Value:
-        m = self.mem.load(self.user_mask, i, lanes, "any")
+    def load_user_mask(self, i: L.Value, lanes: L.Value | None, how: str) -> L.Value:
+        m = self.mem.load(self.user_mask, i, lanes, how)
         return self.b.icmp_unsigned("!=", m, const(m.type, 0))
 
-    def full_loop(self, entry: L.Block, head: L.Block, masked: bool, tail_bb: L.Block,
+    def full_loop(self, entry: L.Block, head: L.Block, mask: str, tail_bb: L.Block,
                   how: str) -> None:
-        """The loop over full vectors from ``begin``, entered from ``entry``; ``how`` the
-        arrays are reached (see :meth:`ArrayAccess.load`)."""
+        """The loop over full vectors from ``begin``, entered from ``entry``.  ``mask``:
+        "all" (every lane active), "masked" (the user's mask) or "either" (the user's mask
+        when given, a run-time choice); ``how`` the arrays are reached (see
+        :meth:`ArrayAccess.load`)."""
         b = self.b
         b.position_at_end(head)
         i = b.phi(I64, name="i")
@@ -180,9 +177,16 @@ class _RangeLoop:
         body_bb = self.rng.append_basic_block(head.name.replace("head", "body"))
         b.cbranch(b.icmp_signed("<", i, self.full_end), body_bb, tail_bb)
         b.position_at_end(body_bb)
-        um = self.load_user_mask(i, None) if masked else None
-        results = self.call_body(i, um if masked else const(self.mask_ty, 1), None, how)
-        self.store_outs(i, results, um, how)
+        every = const(self.mask_ty, 1)
+        if mask == "all":
+            um, exec_mask = None, every
+        elif mask == "masked":
+            um = exec_mask = self.load_user_mask(i, None, how)
+        else:
+            um = exec_mask = self.mem.branch(
+                self.has_mask, lambda: self.load_user_mask(i, None, how), lambda: every)
+        results = self.call_body(i, exec_mask, None, how)
+        self.store_outs(i, results, um, how, self.has_mask if mask == "either" else None)
         i.add_incoming(b.add(i, const(I64, self.W)), b.block)
         b.branch(head)
 
@@ -202,7 +206,7 @@ class _RangeLoop:
         pre = b.block
         b.cbranch(self.has_mask, with_m, join)
         b.position_at_end(with_m)
-        um = b.and_(lanes, self.load_user_mask(full_end, lanes))
+        um = b.and_(lanes, self.load_user_mask(full_end, lanes, "any"))
         with_m_end = b.block
         b.branch(join)
         b.position_at_end(join)
