@@ -2,7 +2,9 @@
 
 The manifest (written by :mod:`rdsl.compiler.backends.clib`) describes each kernel's
 source-level params (scalar, vec, mat, struct, tuple, buffer), their flat leaves, and the
-flat C arguments of its entry points.  :class:`Kernel` converts between the two.
+flat C arguments of its entry points.  :class:`Kernel` converts between the two: each leaf
+of an array is a strided view of the caller's array (its pointer and byte stride go to C, ABI
+2), so no layout is copied, only dtypes the kernel does not take.
 """
 
 from __future__ import annotations

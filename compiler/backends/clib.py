@@ -101,17 +101,18 @@ def header(module: ir.Module, target: Target, stem: str) -> str:
         lines.append(" *   pointer and a stride in bytes: element i is at base + i * stride (so")
         lines.append(" *   structure-of-arrays data passes sizeof(type), an array of structures")
         lines.append(" *   passes sizeof(struct) and the field's address; any alignment, negative")
-        lines.append(" *   strides and 0 (one value for every element) included).  Contiguous")
-        lines.append(" *   arrays aligned to their element size take plain vector loads and")
-        lines.append(" *   stores; others are gathered and scattered lane by lane.")
+        lines.append(" *   strides and 0 (one value for every element) included).  A call whose")
+        lines.append(" *   arrays are all contiguous and aligned to their element size runs plain")
+        lines.append(" *   vector loads and stores; strides of 2 to 4 elements take wide loads")
+        lines.append(" *   and shuffles, other strides gathers and scatters.")
         lines.append(" *   Arguments:")
         for a in c_args(fn):
             what = {"varying": "input array of n", "uniform": "uniform value",
                     "buffer": "contiguous buffer (read/write)",
                     "output": "output array of n"}[a.kind]
             lines.append(f" *   {a.name}: {a.dtype}, {what}")
-        lines.append(" *   mask: n bytes, 0 = inactive lane (its outputs are not written);"
-                     " NULL = all active")
+        lines.append(" *   mask: n bytes (with its stride), 0 = inactive lane (its outputs are"
+                     " not written); NULL = all active")
         lines.append(" *   The _range variant processes elements [begin, end) only. */")
         lines.append(c_prototype(fn) + ";")
         lines.append(c_prototype(fn, range_=True) + ";")
