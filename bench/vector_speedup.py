@@ -1,22 +1,31 @@
 """Vector speedup: a shading-heavy kernel (GGX visible-normal sampling plus evaluation) over
 4M samples on every CPU target, single-threaded and on all cores.
 
-Prints a table of time, Msamples/s and speedup over `scalar`, then cold compile time and
-cached load time (in a fresh process).  Not a test: run it by hand.
+Each target is called two ways: the natural call (C-order ``(N, 3)`` and ``(N, 2)`` arrays,
+a fresh result every call) and the component-array call (every vector component its own
+contiguous array, the output reused with ``out=``).  Prints time, Msamples/s and speedup
+over `scalar` for both, the natural call on all cores, then what a fresh output costs
+without the kernel's output pool, cold compile time and cached load time (in a fresh
+process).  Not a test: run it by hand.
 
-    python bench/vector_speedup.py [--n 4194304] [--repeat 5]
+    python bench/vector_speedup.py [--n 4194304] [--repeat 5] [--clock wall|cpu]
+
+``--clock cpu`` times the one-thread calls in CPU time of the calling thread, which other
+processes on a loaded machine disturb less than wall time.
 """
 
 from __future__ import annotations
 
 import argparse
 import os
+import resource
 import statistics
 import subprocess
 import sys
 import tempfile
 import time
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import rdsl
@@ -37,14 +46,14 @@ def inputs(n: int) -> tuple:
     return wi, u1, u2, alpha
 
 
-def timed(fn, repeat: int) -> float:
-    fn()  # warm up (page faults, thread pool)
-    times = []
-    for _ in range(repeat):
-        t = time.perf_counter()
-        fn()
-        times.append(time.perf_counter() - t)
-    return statistics.median(times)
+def clock(kind: str) -> Any:
+    return time.thread_time if kind == "cpu" else time.perf_counter
+
+
+def timed(fn: Any, clk: Any = time.perf_counter) -> float:
+    t = clk()
+    fn()
+    return clk() - t
 
 
 def cached_load_seconds(target: str, cache: str) -> float:
@@ -63,8 +72,11 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--n", type=int, default=4 * 1024 * 1024)
     ap.add_argument("--repeat", type=int, default=5)
+    ap.add_argument("--clock", choices=["wall", "cpu"], default="wall")
     args = ap.parse_args()
-    data = inputs(args.n)
+    wi, u1, u2, alpha = inputs(args.n)
+    # the component arrays: every vector component contiguous (Fortran order)
+    comp = (np.asfortranarray(wi), u1, np.asfortranarray(u2), alpha)
     cores = os.cpu_count() or 1
     kernels = {}
     compile_s = {}
@@ -78,31 +90,76 @@ def main() -> None:
             kernels[name] = rdsl.jit(KERNEL, target=name)["ggx_eval_sample"]
             compile_s[name] = time.perf_counter() - t
         cached = {name: cached_load_seconds(name, cache) for name in kernels}
-    reference = kernels["scalar"](*data, threads=1)
-    mismatch = {}
+    reference = kernels["scalar"](wi, u1, u2, alpha, threads=1)
+    mismatch, outs = {}, {}
     for name, k in kernels.items():
-        out = k(*data, threads=1)
-        mismatch[name] = float(np.mean(~np.isclose(out, reference, rtol=1e-5, atol=1e-6)))
-    # interleave the targets across repeats so machine noise hits them alike
-    one: dict[str, list[float]] = {n: [] for n in kernels}
-    alln: dict[str, list[float]] = {n: [] for n in kernels}
+        outs[name] = k(*comp, threads=1)
+        assert np.array_equal(k(wi, u1, u2, alpha, threads=1), outs[name], equal_nan=True)
+        mismatch[name] = float(np.mean(~np.isclose(outs[name], reference, rtol=1e-5,
+                                                   atol=1e-6)))
+    clk = clock(args.clock)
+    calls = {}
+    for name, k in kernels.items():
+        calls[name] = {
+            "natural": lambda k=k: k(wi, u1, u2, alpha, threads=1),
+            "component": lambda k=k, o=outs[name]: k(*comp, threads=1, out=o),
+            "all cores": lambda k=k: k(wi, u1, u2, alpha, threads=cores)}
+        for fn in calls[name].values():
+            fn()  # warm up (page faults, thread pool, the output pool)
+    # interleave the targets and calls across repeats so machine noise hits them alike
+    times = {(n, c): [] for n in calls for c in calls[n]}
     for _ in range(args.repeat):
-        for name, k in kernels.items():
-            one[name].append(timed(lambda: k(*data, threads=1), 1))
-            alln[name].append(timed(lambda: k(*data, threads=cores), 1))
-    rows = [(n, statistics.median(one[n]), statistics.median(alln[n]), compile_s[n],
-             cached[n], mismatch[n]) for n in kernels]
-    base1 = rows[0][1]
-    print(f"\nGGX sample+eval, {args.n} samples, median of {args.repeat} runs, "
-          f"{cores} cores\n")
-    print(f"{'target':8} {'1 thread s':>11} {'Msamp/s':>8} {'speedup':>8} "
-          f"{'all cores s':>12} {'speedup':>8} {'compile s':>10} {'cached s':>9} "
-          f"{'!=scalar':>9}")
-    for name, t1, tn, cold, cached, mism in rows:
-        print(f"{name:8} {t1:11.4f} {args.n / t1 / 1e6:8.1f} {base1 / t1:7.2f}x "
-              f"{tn:12.4f} {base1 / tn:7.2f}x {cold:10.2f} {cached:9.3f} {mism:9.2%}")
-    print("\nspeedup is over `scalar` on 1 thread; '!=scalar' is the fraction of outputs "
-          "that differ from scalar beyond 1e-5 relative")
+        for name, by_call in calls.items():
+            for call, fn in by_call.items():
+                times[name, call].append(timed(fn, time.perf_counter if call == "all cores"
+                                               else clk))
+    med = {key: statistics.median(v) for key, v in times.items()}
+    report(args, cores, kernels, med)
+    fresh_output_cost(kernels, (wi, u1, u2, alpha), args.repeat, clk)
+    print(f"\n{'target':8} {'compile s':>10} {'cached s':>9} {'!=scalar':>9}")
+    for name in kernels:
+        print(f"{name:8} {compile_s[name]:10.2f} {cached[name]:9.3f} {mismatch[name]:9.2%}")
+    print("\n'!=scalar' is the fraction of outputs that differ from scalar beyond 1e-5 relative")
+
+
+def report(args: Any, cores: int, kernels: dict[str, Any], med: dict[tuple, float]) -> None:
+    n = args.n
+    print(f"\nGGX sample+eval, {n} samples, median of {args.repeat} runs "
+          f"({args.clock} clock on one thread), {cores} cores; speedups over `scalar` on "
+          "one thread, called the same way\n")
+    print(f"{'target':8} {'natural s':>10} {'Msamp/s':>8} {'speedup':>8} "
+          f"{'component s':>12} {'Msamp/s':>8} {'speedup':>8} {'nat/comp':>9} "
+          f"{'all cores s':>12} {'speedup':>8}")
+    nat0, comp0 = med["scalar", "natural"], med["scalar", "component"]
+    for name in kernels:
+        nat, comp, alln = (med[name, c] for c in ("natural", "component", "all cores"))
+        print(f"{name:8} {nat:10.4f} {n / nat / 1e6:8.1f} {nat0 / nat:7.2f}x "
+              f"{comp:12.4f} {n / comp / 1e6:8.1f} {comp0 / comp:7.2f}x {nat / comp:9.3f} "
+              f"{alln:12.4f} {nat0 / alln:7.2f}x")
+    print("\nnatural: C-order (N, 3)/(N, 2) arrays, a fresh result each call; component: "
+          "one contiguous array per component, out= reused")
+
+
+def fresh_output_cost(kernels: dict[str, Any], data: tuple, repeat: int, clk: Any) -> None:
+    """The natural call with the output pool on and off (a fresh block every call), on the
+    fastest target: what page faulting in a fresh output costs."""
+    name = list(kernels)[-1]
+    k = kernels[name]
+    capacity = k.pool.capacity
+    on, off, faults = [], [], []
+    for _ in range(repeat):
+        k.pool.capacity = capacity
+        on.append(timed(lambda: k(*data, threads=1), clk))
+        k.pool.capacity = 0
+        f0 = resource.getrusage(resource.RUSAGE_SELF).ru_minflt
+        off.append(timed(lambda: k(*data, threads=1), clk))
+        faults.append(resource.getrusage(resource.RUSAGE_SELF).ru_minflt - f0)
+    k.pool.capacity = capacity
+    mb = len(data[1]) * 16 / 2 ** 20
+    print(f"\nfresh {mb:.0f} MB output on every {name} call (output pool off): "
+          f"{statistics.median(off):.4f} s vs {statistics.median(on):.4f} s with the pool "
+          f"(+{statistics.median(off) - statistics.median(on):.4f} s, "
+          f"{statistics.median(faults):.0f} page faults)")
 
 
 if __name__ == "__main__":

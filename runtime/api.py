@@ -13,6 +13,7 @@ import time
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from ..compiler.backends.base import ABI_VERSION
 from ..compiler.diagnostics import CompileError
 from ..compiler.sources import read_source
 from ..core.color import MODELS, ColorModel
@@ -153,6 +154,10 @@ def load(path: str | os.PathLike, *, from_cache: bool = False,
         variant = manifest.get("variant")
     except (OSError, ValueError, KeyError, TypeError, AttributeError) as e:
         raise CompileError(f"{man}: not a valid rdsl manifest ({e})") from None
+    if manifest.get("abi", 1) != ABI_VERSION:
+        raise CompileError(f"{man}: built by rdsl {manifest.get('rdsl_version', '?')} for C ABI "
+                           f"{manifest.get('abi', 1)}; this rdsl calls ABI {ABI_VERSION} "
+                           "(strided arrays): recompile it")
     if variant is not None and variant not in MODELS:
         raise CompileError(f"{man}: not a valid rdsl manifest (unknown variant `{variant}`)")
     try:

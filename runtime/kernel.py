@@ -2,7 +2,9 @@
 
 The manifest (written by :mod:`rdsl.compiler.backends.clib`) describes each kernel's
 source-level params (scalar, vec, mat, struct, tuple, buffer), their flat leaves, and the
-flat C arguments of its entry points.  :class:`Kernel` converts between the two.
+flat C arguments of its entry points.  :class:`Kernel` converts between the two: each leaf
+of an array is a strided view of the caller's array (its pointer and byte stride go to C, ABI
+2), so no layout is copied, only dtypes the kernel does not take.
 """
 
 from __future__ import annotations
@@ -15,6 +17,8 @@ from concurrent.futures import Future, ThreadPoolExecutor
 from typing import Any
 
 import numpy as np
+
+from .out_pool import OutputPool
 
 DTYPES = {"f32": np.dtype(np.float32), "i32": np.dtype(np.int32),
           "u32": np.dtype(np.uint32), "u64": np.dtype(np.uint64), "bool": np.dtype(np.bool_)}
@@ -83,8 +87,14 @@ class Kernel:
                             if not p["uniform"] or p["type"]["kind"] == "buffer"]
         self._uniform = {p["name"]: p for p in self.params
                          if p["uniform"] and p["type"]["kind"] != "buffer"}
-        argtypes = [ctypes.c_void_p if a["kind"] != "uniform" else _CTYPES[a["dtype"]]
-                    for a in self.args] + [ctypes.c_void_p]
+        self.pool = OutputPool()  # fresh outputs' blocks, reused once no result holds them
+        self._strided = [bool(a.get("strided")) for a in self.args]
+        argtypes: list[Any] = []
+        for a, strided in zip(self.args, self._strided):
+            argtypes.append(ctypes.c_void_p if a["kind"] != "uniform" else _CTYPES[a["dtype"]])
+            if strided:
+                argtypes.append(ctypes.c_int64)  # the byte stride of the array before it
+        argtypes += [ctypes.c_void_p, ctypes.c_int64]  # the mask and its stride
         self._fn = getattr(lib, info["symbol"])
         self._fn.argtypes = [ctypes.c_int64] + argtypes
         self._fn.restype = None
@@ -151,11 +161,11 @@ class Kernel:
             if arr.dtype.kind not in _KINDS[dtype]:
                 raise self._err(f"parameter `{path}` {want}, got dtype {arr.dtype}")
             if kind == "mat" and arr.ndim == 3 and arr.shape[1:] == (tj["n"], tj["n"]):
-                arr = arr.reshape(arr.shape[0], k)
+                out.extend((path, arr[:, r, c]) for r in range(tj["n"]) for c in range(tj["n"]))
+                return
             if arr.ndim != 2 or arr.shape[1] != k:
                 raise self._err(f"parameter `{path}` {want}, got shape {arr.shape}")
-            for j in range(k):
-                out.append((path, arr[:, j]))
+            out.extend((path, arr[:, j]) for j in range(k))  # strided views, no copies
         elif kind == "struct":
             if not isinstance(value, dict):
                 raise self._err(f"parameter `{path}` expects a dict of fields "
@@ -238,38 +248,51 @@ class Kernel:
         manifest).  Returns a (N,) array, a (N, k) array for vectors, a dict for structs, a
         tuple for tuples, or None.
 
-        ``out``: the result of an earlier call of this kernel over as many elements; the
-        kernel writes into its arrays (lanes outside ``mask`` keep their old values) and
-        returns it.  A loop of calls then reuses its memory instead of faulting in fresh
-        pages on every call.
+        Arrays are read in place, in any layout one stride per axis describes: a C-order
+        ``(N, 3)`` array, a Fortran-order one, slices with steps, fields of a record array at
+        any offset.  Only an array whose dtype is not the kernel's (float64 for a float
+        param, ints for a bool, another byte order) is converted, into a temporary copy.  A
+        Python scalar for a varying param is one value for every element (stride 0).
+
+        ``out``: arrays shaped like the result (the result of an earlier call over as many
+        elements, or arrays of the caller's own, in any layout: a C-order ``(N, 4)`` array,
+        columns of a record array); the kernel writes into them (lanes outside ``mask`` keep
+        their old values) and returns ``out``.  Without ``out``, large results are written
+        into blocks of ``self.pool`` (see :mod:`rdsl.runtime.out_pool`), which reuses a
+        block once no array of an earlier result refers to it: ``r = k(x)`` in a loop
+        faults in no fresh pages after the second call.  The fastest loop passes the same
+        ``out`` every time (no allocation at all, nothing retained by the pool).
 
         ``wait=False`` returns a :class:`Pending` at once, while the thread pool runs the
         call: calls queued together share the pool, so one's last tasks overlap the next's
         first (the arrays passed in must not change until ``result()``)."""
         values = self._bind(args, kwargs)
         c_vals: list[Any] = [None] * len(self.args)
+        strides: list[int] = [0] * len(self.args)
         leaves, leaf_slots = self._convert_params(values, c_vals)
         n = self._length(leaves, mask)
-        mask_arr = self._mask_array(mask, n) if mask is not None else None
+        mask_arr = _mask_array(mask) if mask is not None else None
         if n is None:
             n = 1
         keep = []
         for (_path, v), slot in zip(leaves, leaf_slots):
-            dt = self.args[slot]["dtype"]
-            if isinstance(v, np.ndarray):
-                a = v != 0 if dt == "bool" and v.dtype.kind != "b" else v
-                a = np.ascontiguousarray(a, dtype=DTYPES[dt])
-            else:
-                a = np.full(n, v, dtype=DTYPES[dt])
+            a = _leaf_memory(v, self.args[slot]["dtype"])
             keep.append(a)
-            c_vals[slot] = a.ctypes.data
-        out_arrays = self._outputs(out, n, mask is not None, c_vals)
+            c_vals[slot], strides[slot] = a.ctypes.data, a.strides[0]
+        out_arrays = self._outputs(out, n, mask is not None, c_vals, strides)
         for i, a in enumerate(self.args):
             if a["kind"] == "buffer":
                 c_vals[i] = c_vals[i].ctypes.data
-        mask_ptr = mask_arr.ctypes.data if mask_arr is not None else None
-
-        futures = self._run(n, c_vals, mask_ptr, threads)
+        flat: list[Any] = []
+        for v, stride, strided in zip(c_vals, strides, self._strided):
+            flat.append(v)
+            if strided:
+                flat.append(stride)
+        if mask_arr is None:
+            flat += [None, 0]
+        else:
+            flat += [mask_arr.ctypes.data, mask_arr.strides[0]]
+        futures = self._run(n, flat, threads)
         pending = Pending(futures, (keep, mask_arr, c_vals),
                           lambda: out if out is not None else self._results(out_arrays, n))
         return pending if not wait else pending.result()
@@ -345,44 +368,40 @@ class Kernel:
                 raise self._err(f"`mask` has {len(m)} elements, expected {n}")
         return n
 
-    @staticmethod
-    def _mask_array(mask: Any, n: int) -> np.ndarray:
-        m = np.asarray(mask)
-        return np.ascontiguousarray(m != 0 if m.dtype.kind != "b" else m).view(np.uint8)
-
-    def _outputs(self, out: Any, n: int, masked: bool, c_vals: list[Any]) -> dict[str, Any]:
+    def _outputs(self, out: Any, n: int, masked: bool, c_vals: list[Any],
+                 strides: list[int]) -> dict[str, Any]:
         """Point the output arguments at ``out``'s arrays, or at fresh ones (returned by
         name)."""
         outs = [(i, a) for i, a in enumerate(self.args) if a["kind"] == "output"]
         out_arrays: dict[str, Any] = {}
         if out is not None:
             for (i, _), arr in zip(outs, self._out_leaves(out, n)):
-                c_vals[i] = arr.ctypes.data
+                c_vals[i], strides[i] = arr.ctypes.data, arr.strides[0]
             return out_arrays
         # outputs of one dtype are the rows of one block, in result order: a vector
-        # result is then a view (no copy), and consecutive leaves are one contiguous array
-        alloc = np.zeros if masked else np.empty
+        # result is then a view (no copy), and consecutive leaves are one contiguous array;
+        # a masked call's lanes outside the mask are 0
         blocks = {}
         for dt in dict.fromkeys(a["dtype"] for _, a in outs):
             count = sum(1 for _, a in outs if a["dtype"] == dt)
-            blocks[dt] = [alloc((count, n), dtype=_C_DTYPES[dt]), 0]
+            blocks[dt] = [self.pool.block((count, n), _C_DTYPES[dt], zero=masked), 0]
         for i, a in outs:
             blk = blocks[a["dtype"]]
             arr = blk[0][blk[1]]
             blk[1] += 1
             out_arrays[a["name"]] = arr
-            c_vals[i] = arr.ctypes.data
+            c_vals[i], strides[i] = arr.ctypes.data, arr.strides[0]
         return out_arrays
 
-    def _run(self, n: int, c_vals: list[Any], mask_ptr: Any, threads: int | None
-             ) -> list[Future]:
-        """Run over [0, n): on this thread, or as tasks of the thread pool (their futures
-        are returned, not waited for)."""
+    def _run(self, n: int, flat: list[Any], threads: int | None) -> list[Future]:
+        """Run over [0, n) with the entry point's arguments ``flat`` (after ``n``): on this
+        thread, or as tasks of the thread pool (their futures are returned, not waited
+        for)."""
         if n <= 0:
             return []
         threads = (os.cpu_count() or 1) if threads is None else max(1, int(threads))
         if threads == 1 or n < 2 * MIN_CHUNK:
-            self._fn(n, *c_vals, mask_ptr)
+            self._fn(n, *flat)
             return []
         W = max(self.width, 1)
         # tasks of at least MIN_CHUNK elements, as many for every thread: with one task
@@ -392,41 +411,18 @@ class Kernel:
         chunk = -(-math.ceil(n / tasks) // W) * W
         bounds = [(b, min(b + chunk, n)) for b in range(0, n, chunk)]
         pool = _pool(threads)
-        return [pool.submit(self._range, b, e, *c_vals, mask_ptr) for b, e in bounds]
+        return [pool.submit(self._range, b, e, *flat) for b, e in bounds]
 
     def _out_leaves(self, result: Any, n: int) -> list[np.ndarray]:
-        """The arrays of ``result`` (as ``_results`` builds it) for the output arguments, in
-        their order, checked to be writeable contiguous views of ``n`` elements of the right
-        dtype."""
-        bad = self._err(f"`out` is not a result of this kernel over {n} elements")
+        """The arrays of ``result`` (shaped as ``_results`` builds it, any strides) for the
+        output arguments, in their order, checked to be writeable views of ``n`` elements of
+        the right dtype (bools as uint8, as the kernel writes them)."""
+        bad = self._err(f"`out` is not a result of this kernel over {n} elements (nor "
+                        "writeable arrays of its dtypes shaped like one)")
         leaves: list[np.ndarray] = []
-
-        def walk(v: Any, t: dict[str, Any]) -> None:
-            kind = t["kind"]
-            if kind == "struct":
-                if not isinstance(v, dict):
-                    raise bad
-                for f, ft in t["fields"]:
-                    walk(v[f], ft)
-            elif kind == "tuple":
-                if not isinstance(v, tuple) or len(v) != len(t["elems"]):
-                    raise bad
-                for e, et in zip(v, t["elems"]):
-                    walk(e, et)
-            elif kind in ("vec", "mat"):
-                a = np.asarray(v)
-                if a.ndim < 2 or a.shape[0] != n:
-                    raise bad
-                cols = a.reshape(n, -1)
-                if not np.may_share_memory(cols, a):
-                    raise bad
-                leaves.extend(cols[:, j] for j in range(cols.shape[1]))
-            else:
-                leaves.append(np.asarray(v))
-
         tj = self.result.get("type")
-        if tj is not None:
-            walk(result, tj)
+        if tj is not None and not _out_walk(result, tj, n, leaves):
+            raise bad
         names = self.result["leaves"]
         if len(leaves) != len(names):
             raise bad
@@ -436,38 +432,60 @@ class Kernel:
             if a["kind"] != "output":
                 continue
             leaf = by_name[a["name"]]
-            if leaf.shape != (n,) or leaf.dtype != DTYPES[a["dtype"]] or \
-                    not leaf.flags.c_contiguous or not leaf.flags.writeable:
+            if leaf.dtype != DTYPES[a["dtype"]] or not leaf.flags.writeable:
                 raise bad
-            arrays.append(leaf)
+            arrays.append(leaf.view(np.uint8) if a["dtype"] == "bool" else leaf)
         return arrays
 
     def _results(self, out_arrays: dict[str, np.ndarray], n: int) -> Any:
         tj = self.result.get("type")
         if tj is None:
             return None
-        leaves = iter(self.result["leaves"])
+        arrays = iter([out_arrays[name] for name in self.result["leaves"]])
+        return _build(tj, arrays, n)
 
-        def take(dtype: str) -> np.ndarray:
-            arr = out_arrays[next(leaves)]
-            return arr.view(np.bool_) if dtype == "bool" else arr
 
-        def build(t: dict[str, Any]) -> Any:
-            kind = t["kind"]
-            if kind == "scalar":
-                return take(t["dtype"])
-            if kind in ("vec", "mat"):
-                k = t["n"] if kind == "vec" else t["n"] * t["n"]
-                cols = [take(t["dtype"]) for _ in range(k)]
-                out = _columns(cols, n)
-                return out.reshape(n, t["n"], t["n"]) if kind == "mat" else out
-            if kind == "struct":
-                return {f: build(ft) for f, ft in t["fields"]}
-            if kind == "tuple":
-                return tuple(build(e) for e in t["elems"])
-            raise TypeError(t)
+def _build(t: dict[str, Any], arrays: Any, n: int) -> Any:
+    """The result of type ``t`` from the output ``arrays`` (an iterator, in leaf order).
+    A plain function, not a recursive closure: a closure's cycle would keep the arrays
+    alive until the garbage collector runs, and the output pool could not reuse them."""
+    kind = t["kind"]
+    if kind == "scalar":
+        arr = next(arrays)
+        return arr.view(np.bool_) if t["dtype"] == "bool" else arr
+    if kind in ("vec", "mat"):
+        k = t["n"] if kind == "vec" else t["n"] * t["n"]
+        out = _columns([next(arrays) for _ in range(k)], n)
+        return out.reshape(n, t["n"], t["n"]) if kind == "mat" else out
+    if kind == "struct":
+        return {f: _build(ft, arrays, n) for f, ft in t["fields"]}
+    if kind == "tuple":
+        return tuple(_build(e, arrays, n) for e in t["elems"])
+    raise TypeError(t)
 
-        return build(tj)
+
+def _out_walk(v: Any, t: dict[str, Any], n: int, leaves: list[np.ndarray]) -> bool:
+    """Append the leaf arrays of ``v``, an ``out=`` of type ``t`` over ``n`` elements, to
+    ``leaves`` (views, any strides); False where it is not shaped like one."""
+    kind = t["kind"]
+    if kind == "struct":
+        return isinstance(v, dict) and all(f in v and _out_walk(v[f], ft, n, leaves)
+                                           for f, ft in t["fields"])
+    if kind == "tuple":
+        return isinstance(v, tuple) and len(v) == len(t["elems"]) and \
+            all(_out_walk(e, et, n, leaves) for e, et in zip(v, t["elems"]))
+    if not isinstance(v, np.ndarray):
+        return False
+    k = t.get("n", 0)
+    if kind == "vec" and v.shape == (n, k):
+        leaves.extend(v[:, j] for j in range(k))
+    elif kind == "mat" and v.shape == (n, k, k):
+        leaves.extend(v[:, r, c] for r in range(k) for c in range(k))
+    elif kind == "scalar" and v.shape == (n,):
+        leaves.append(v)
+    else:
+        return False
+    return True
 
 
 def _columns(cols: list[np.ndarray], n: int) -> np.ndarray:
@@ -482,6 +500,31 @@ def _columns(cols: list[np.ndarray], n: int) -> np.ndarray:
         row0 = (first.ctypes.data - base.ctypes.data) // step
         return base[row0:row0 + len(cols)].T
     return np.stack(cols, axis=1)
+
+
+def _leaf_memory(v: Any, dtype: str) -> np.ndarray:
+    """The 1-D array the kernel reads a varying leaf from (its stride is the call's): the
+    array itself when its dtype is the kernel's, whatever its strides (no copy); a converted
+    copy when the dtype differs (float64 for f32, ints for bool, another byte order); one
+    element read with stride 0 for a scalar.  Bools are passed as their bytes (uint8)."""
+    want = DTYPES[dtype]
+    if not isinstance(v, np.ndarray):
+        a = np.full(1, v, dtype=want)
+        a = np.lib.stride_tricks.as_strided(a, shape=(1,), strides=(0,))
+    elif v.dtype == want:
+        a = v
+    elif dtype == "bool" and v.dtype.kind != "b":
+        a = v != 0
+    else:
+        a = v.astype(want)
+    return a.view(np.uint8) if dtype == "bool" else a
+
+
+def _mask_array(mask: Any) -> np.ndarray:
+    """The mask as the kernel reads it: a uint8 view of a bool array (any strides), else a
+    converted copy (nonzero = active)."""
+    m = np.asarray(mask)
+    return (m if m.dtype.kind == "b" else m != 0).view(np.uint8)
 
 
 def _c_scalar(v: Any, dtype: str) -> Any:

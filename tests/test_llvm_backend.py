@@ -407,8 +407,9 @@ def test_emit_llvm_and_object():
     obj = llvm_backend.emit_object(_small(4), "sse4")
     assert obj[:4] == b"\x7fELF"
     sigs = llvm_backend.kernel_signatures(_small(1))
-    assert sigs["scale"] == ("void rdsl_scale(int64_t n, const float* x, float s, "
-                             "float* out_ret, const uint8_t* mask)")
+    assert sigs["scale"] == ("void rdsl_scale(int64_t n, const float* x, int64_t x_stride, "
+                             "float s, float* out_ret, int64_t out_ret_stride, "
+                             "const uint8_t* mask, int64_t mask_stride)")
 
 
 def test_width_mismatch_is_a_compile_error():

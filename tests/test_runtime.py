@@ -184,6 +184,34 @@ def test_out_reuses_a_result(mod):
         mod["bsdf.shade"](_surf(5, rng), np.zeros((5, 3)), out=first)
 
 
+def test_fresh_results_reuse_only_released_blocks(mod):
+    """Large fresh results come from the kernel's output pool: a block is written again only
+    once no result or view of it is alive, and a masked call still gets zeros outside the
+    mask from a reused block."""
+    n = 300_000  # over the pool's 1 MiB floor
+    x = np.arange(n, dtype=np.float32)
+    half = np.full(n, 0.5, np.float32)
+    first = mod.lerp(x, x + 2, half)
+    view = mod.lerp(x, x, half)[::3]  # only a view of the second result survives
+    third = mod.lerp(x, x + 4, half)
+    assert not any(np.shares_memory(a, b)
+                   for a, b in ((first, view), (first, third), (view, third)))
+    np.testing.assert_array_equal(first, x + 1)
+    np.testing.assert_array_equal(view, x[::3])
+    released = view.__array_interface__["data"][0]
+    del view
+    fourth = mod.lerp(x, x + 6, half)  # the second result's block, released
+    assert fourth.__array_interface__["data"][0] == released
+    np.testing.assert_array_equal(first, x + 1)
+    np.testing.assert_array_equal(third, x + 2)
+    np.testing.assert_array_equal(fourth, x + 3)
+    del fourth
+    on = np.arange(n) % 3 == 0
+    masked = mod.lerp(x, x + 6, half, mask=on)
+    assert masked.__array_interface__["data"][0] == released
+    np.testing.assert_array_equal(masked, np.where(on, x + 3, 0))
+
+
 def test_calls_queued_together(mod):
     rng = np.random.default_rng(4)
     n = 50_001

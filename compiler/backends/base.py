@@ -1,4 +1,12 @@
-"""What every backend shares: a name, its capabilities, and how kernels appear in an ABI."""
+"""What every backend shares: a name, its capabilities, and how kernels appear in an ABI.
+
+The C ABI (version :data:`ABI_VERSION`) passes every array a kernel maps over (varying
+inputs, outputs and the mask) as a base pointer plus an ``int64_t`` stride in bytes: element
+``i`` is at ``base + i * stride``.  Any layout numpy can describe with one stride (C- or
+Fortran-order columns, slices with steps, fields of record arrays at any offset, negative
+steps, stride 0 for one value broadcast to every element) is read and written in place.
+Buffers stay plain contiguous pointers (the kernel indexes them itself).  A backend that gains
+a runtime takes the same arguments, in the order of :func:`c_params`."""
 
 from __future__ import annotations
 
@@ -36,6 +44,7 @@ class Backend:
 # --------------------------------------------------------------------------------------
 # The C-level view of a kernel, shared by the LLVM backend, the C header and the runtime.
 
+ABI_VERSION = 2  # 1: contiguous arrays, no strides; 2: a byte stride after every array
 CTYPES = {"f32": "float", "i32": "int32_t", "u32": "uint32_t", "u64": "uint64_t",
           "bool": "uint8_t"}
 
@@ -55,6 +64,11 @@ class CArg:
     uniform_result: bool = False  # output only: the kernel computes one value for all lanes
 
     @property
+    def strided(self) -> bool:
+        """Whether the C argument is followed by its stride (``int64_t``, in bytes)."""
+        return self.kind in ("varying", "output")
+
+    @property
     def ctype(self) -> str:
         base = CTYPES[self.dtype]
         if self.kind == "uniform":
@@ -64,7 +78,8 @@ class CArg:
         return f"{base}*"
 
     def to_json(self) -> dict[str, Any]:
-        return {"name": self.name, "dtype": self.dtype, "kind": self.kind}
+        return {"name": self.name, "dtype": self.dtype, "kind": self.kind,
+                "strided": self.strided}
 
 
 def kernels(module: ir.Module) -> list[ir.Function]:
@@ -123,28 +138,43 @@ _C_RESERVED = {
     "enum", "extern", "float", "for", "goto", "if", "inline", "int", "long", "register",
     "restrict", "return", "short", "signed", "sizeof", "static", "struct", "switch",
     "typedef", "union", "unsigned", "void", "volatile", "while", "bool", "true", "false",
-    "n", "begin", "end", "mask"}
+    "n", "begin", "end", "mask", "mask_stride"}
 
 
 def c_arg_names(args: list[CArg]) -> list[str]:
-    """Distinct C parameter names for ``args`` (outputs are prefixed with ``out_``)."""
+    """Distinct C parameter names for ``args`` (outputs are prefixed with ``out_``); the stride
+    of a strided argument is named ``<name>_stride`` (kept distinct as well)."""
     names: list[str] = []
+    taken: set[str] = set()
     for a in args:
         base = ("out_" if a.kind == "output" else "") + c_name(a.name)
         if base in _C_RESERVED or base[:1].isdigit():
             base = "arg_" + base
         name, k = base, 2
-        while name in names:
+        while name in taken or (a.strided and name + "_stride" in taken):
             name, k = f"{base}_{k}", k + 1
         names.append(name)
+        taken.add(name)
+        if a.strided:
+            taken.add(name + "_stride")
     return names
+
+
+def c_params(args: list[CArg]) -> list[tuple[str, str]]:
+    """(C type, name) of every parameter of an entry point after ``n`` (or ``begin, end``):
+    each argument, followed by ``int64_t <name>_stride`` when it is strided, then the mask
+    and its stride."""
+    out: list[tuple[str, str]] = []
+    for a, name in zip(args, c_arg_names(args)):
+        out.append((a.ctype, name))
+        if a.strided:
+            out.append(("int64_t", name + "_stride"))
+    return out + [("const uint8_t*", "mask"), ("int64_t", "mask_stride")]
 
 
 def c_prototype(fn: ir.Function, range_: bool = False) -> str:
     """The C prototype of ``rdsl_<name>`` (or of ``rdsl_<name>_range``)."""
     cname = "rdsl_" + c_name(fn.name) + ("_range" if range_ else "")
     head = ["int64_t begin", "int64_t end"] if range_ else ["int64_t n"]
-    args = c_args(fn)
-    names = c_arg_names(args)
-    args = [f"{a.ctype} {name}" for a, name in zip(args, names)]
-    return f"void {cname}({', '.join(head + args + ['const uint8_t* mask'])})"
+    params = [f"{t} {name}" for t, name in c_params(c_args(fn))]
+    return f"void {cname}({', '.join(head + params)})"

@@ -1,11 +1,14 @@
 """The C entry points of a kernel, in LLVM: ``rdsl_<name>_range(begin, end, args..., outs...,
-mask)`` loops over ``[begin, end)`` in steps of W and calls the (always inlined) body;
-``rdsl_<name>(n, ...)`` calls it on ``[0, n)``.
+mask, mask_stride)`` loops over ``[begin, end)`` in steps of W and calls the (always inlined)
+body; ``rdsl_<name>(n, ...)`` calls it on ``[0, n)``.  Every array comes with its byte stride
+(see :func:`rdsl.compiler.backends.base.c_params`).
 
-Full vectors use plain unaligned loads and stores, in two copies of the loop: one for
-``mask == NULL`` (every lane active) and one that reads the user's mask and stores outputs
-with ``llvm.masked.store``.  The last partial vector uses masked loads and stores with the lane
-mask ``i + lane < end``.  Uniform results are broadcast to every lane.
+Full vectors are loaded and stored whole, in two copies of the loop: one for ``mask == NULL``
+(every lane active) and one that reads the user's mask and stores outputs under it.  The last
+partial vector uses masked loads and stores with the lane mask ``i + lane < end``.  How one
+vector of an array is reached (plain vector access when it is contiguous, shuffles or gathers
+when strided) is ``llvm_arrays``' job; the body is inlined once per loop either way.  Uniform
+results are broadcast to every lane.
 """
 
 from __future__ import annotations
@@ -17,7 +20,8 @@ import llvmlite.ir as L
 from .. import ir
 from ..diagnostics import CompileError
 from .base import CArg, c_arg_names, c_args, c_name, split_params
-from .llvm_ops import ALIGN, I1, I8, I32, I64, MEM, PTR, const, mangle, with_elem
+from .llvm_arrays import ArrayAccess, StridedArray
+from .llvm_ops import I8, I32, I64, MEM, PTR, const, with_elem
 
 
 def emit_kernel(ml: Any, fn: ir.Function, body: L.Function) -> None:
@@ -29,11 +33,13 @@ def emit_kernel(ml: Any, fn: ir.Function, body: L.Function) -> None:
                            "(run vectorize first)", fn.loc)
     args = c_args(fn)
 
-    def c_ty(a: CArg) -> L.Type:
-        return PTR if a.kind != "uniform" else MEM[a.dtype]
-
+    arg_tys: list[L.Type] = []
+    for a in args:
+        arg_tys.append(PTR if a.kind != "uniform" else MEM[a.dtype])
+        if a.strided:
+            arg_tys.append(I64)  # the byte stride
+    arg_tys += [PTR, I64]  # the mask and its stride
     cname = "rdsl_" + c_name(fn.name)
-    arg_tys = [c_ty(a) for a in args] + [PTR]
     rng = L.Function(ml.mod, L.FunctionType(L.VoidType(), [I64, I64] + arg_tys),
                      cname + "_range")
     ml.attrs(rng)
@@ -54,118 +60,133 @@ def _range_fn(ml: Any, rng: L.Function, body: L.Function, args: list[CArg]) -> N
 
 class _RangeLoop:
     """Builds the body of ``rdsl_<name>_range``: its arguments, the loads and stores of one
-    vector of elements, and the three loops (all lanes, user mask, tail)."""
+    vector of elements (through :class:`ArrayAccess`, for any strides), and four loops: over
+    full vectors of contiguous arrays with every lane active or under the user's mask, over
+    full vectors of strided arrays (either), and the tail."""
 
     def __init__(self, ml: Any, rng: L.Function, body: L.Function, args: list[CArg]) -> None:
         self.ml, self.rng, self.body, self.W = ml, rng, body, ml.width
         self.begin, self.end = rng.args[0], rng.args[1]
-        cargs = list(rng.args[2:-1])
-        self.user_mask = rng.args[-1]
-        for name, la in zip(c_arg_names(args), cargs):
-            la.name = name
-        self.begin.name, self.end.name, self.user_mask.name = "begin", "end", "mask"
+        self.begin.name, self.end.name = "begin", "end"
+        it = iter(rng.args[2:])
+        self.arrays: dict[int, StridedArray] = {}  # position in args -> its array
+        values: list[L.Value] = []
+        for k, (a, name) in enumerate(zip(args, c_arg_names(args))):
+            v = next(it)
+            v.name = name
+            values.append(v)
+            if a.strided:
+                stride = next(it)
+                stride.name = name + "_stride"
+                self.arrays[k] = StridedArray(a.dtype, v, stride)
+        mask, mask_stride = next(it), next(it)
+        mask.name, mask_stride.name = "mask", "mask_stride"
+        self.user_mask = StridedArray("bool", mask, mask_stride)
         n_in = sum(a.kind != "output" for a in args)
         self.ins_args, self.outs = args[:n_in], args[n_in:]
-        self.in_vals, self.out_ptrs = cargs[:n_in], cargs[n_in:]
+        self.in_vals = values[:n_in]
+        self.out_arrays = [self.arrays[k] for k in range(n_in, len(args))]
         self.b = L.IRBuilder(rng.append_basic_block("entry"))
-        self.mask_ty = L.VectorType(I1, self.W) if self.W > 1 else I1
+        self.mem = ArrayAccess(ml, rng, self.b, self.end)
+        self.mask_ty = self.mem.mask_ty
 
     def emit(self) -> None:
         b, W = self.b, self.W
-        # uniform params are converted once, outside the loops
+        # uniform params are converted and arrays classified once, outside the loops
         self.uniforms = []
         for a, v in zip(self.ins_args, self.in_vals):
             if a.kind == "uniform" and a.dtype == "bool":
                 v = b.icmp_unsigned("!=", v, const(I8, 0))
             self.uniforms.append(v)
+        for arr in [*self.arrays.values(), self.user_mask]:
+            self.mem.prepare(arr)
         count = b.sub(self.end, self.begin)
         count = b.select(b.icmp_signed("<", count, const(I64, 0)), const(I64, 0), count)
         self.full_end = b.add(self.begin, b.and_(count, const(I64, ~(W - 1))))
-        self.has_mask = b.icmp_unsigned("!=", self.user_mask, L.Constant(PTR, None))
+        self.has_mask = b.icmp_unsigned("!=", self.user_mask.ptr, L.Constant(PTR, None))
         tail_bb = self.rng.append_basic_block("tail")
+        fast = self.rng.append_basic_block("contiguous")
         loop_a = self.rng.append_basic_block("all.head")
         loop_m = self.rng.append_basic_block("masked.head")
+        if W == 1:  # one element per step: its address is all a stride changes
+            b.branch(fast)
+        else:
+            loop_s = self.rng.append_basic_block("strided.head")
+            b.cbranch(self.all_contiguous(), fast, loop_s)
+            self.full_loop(b.block, loop_s, "either", tail_bb, "strided")
+        b.position_at_end(fast)
         b.cbranch(self.has_mask, loop_m, loop_a)
-        entry = b.block
-        # full vectors, no user mask / with user mask
-        for head, masked in ((loop_a, False), (loop_m, True)):
-            self.full_loop(entry, head, masked, tail_bb)
-        # the tail: fewer than W elements, masked loads and stores
+        # full vectors of contiguous arrays, without and with a user mask
+        self.full_loop(fast, loop_a, "all", tail_bb, "contiguous")
+        self.full_loop(fast, loop_m, "masked", tail_bb, "contiguous")
         b.position_at_end(tail_bb)
         if W == 1:
             b.ret_void()
             return
+        # the tail: fewer than W elements, masked loads and stores
         self.tail()
 
-    def vec_ty(self, dtype: str) -> L.Type:
-        t = MEM[dtype]
-        return L.VectorType(t, self.W) if self.W > 1 else t
-
-    def gep(self, ptr: L.Value, dtype: str, i: L.Value) -> L.Value:
-        return self.b.gep(ptr, [i], source_etype=MEM[dtype])
-
-    def masked_load(self, ty: L.Type, p: L.Value, align: int, lanes: L.Value) -> L.Value:
-        return self.b.call(self.ml.intrinsic(f"llvm.masked.load.{mangle(ty)}.p0", ty,
-                                             [PTR, I32, self.mask_ty, ty]),
-                           [p, const(I32, align), lanes, const(ty, 0)])
-
-    def load_in(self, a: CArg, ptr: L.Value, i: L.Value, lanes: L.Value | None) -> L.Value:
-        """Load W elements of a varying input starting at i (lanes: tail mask or None)."""
+    def all_contiguous(self) -> L.Value:
+        """i1: every array (the mask too, when given) is contiguous and aligned.  Such calls
+        run loops with plain accesses only: a branch per access costs AVX2 up to 16%."""
         b = self.b
-        ty = self.vec_ty(a.dtype)
-        p = self.gep(ptr, a.dtype, i)
-        if lanes is None:
-            v = b.load(p, typ=ty, align=ALIGN[a.dtype])
-        else:
-            v = self.masked_load(ty, p, ALIGN[a.dtype], lanes)
+        ok = b.or_(b.not_(self.has_mask), self.user_mask.contiguous)
+        for arr in self.arrays.values():
+            ok = b.and_(ok, arr.contiguous)
+        return ok
+
+    def load_in(self, a: CArg, arr: StridedArray, i: L.Value, lanes: L.Value | None,
+                how: str) -> L.Value:
+        """Load W elements of a varying input starting at i (lanes: tail mask or None)."""
+        v = self.mem.load(arr, i, lanes, how)
         if a.dtype == "bool":
-            v = b.icmp_unsigned("!=", v, const(ty, 0))
+            v = self.b.icmp_unsigned("!=", v, const(v.type, 0))
         return v
 
-    def call_body(self, i: L.Value, exec_mask: L.Value, lanes: L.Value | None) -> list:
-        vals = [self.load_in(a, ptr, i, lanes) if a.kind == "varying" else u
-                for a, ptr, u in zip(self.ins_args, self.in_vals, self.uniforms)]
+    def call_body(self, i: L.Value, exec_mask: L.Value, lanes: L.Value | None,
+                  how: str) -> list:
+        vals = [self.load_in(a, self.arrays[k], i, lanes, how) if a.kind == "varying" else u
+                for k, (a, u) in enumerate(zip(self.ins_args, self.uniforms))]
         res = self.b.call(self.body, vals + [exec_mask])
         return [self.b.extract_value(res, k) for k in range(len(self.outs))]
 
-    def store_outs(self, i: L.Value, results: list, store_mask: L.Value | None) -> None:
+    def store_outs(self, i: L.Value, results: list, store_mask: L.Value | None,
+                   how: str, masked: L.Value | None = None) -> None:
         b, W = self.b, self.W
-        for a, ptr, v in zip(self.outs, self.out_ptrs, results):
+        for a, arr, v in zip(self.outs, self.out_arrays, results):
             if a.dtype == "bool":
                 v = b.zext(v, with_elem(v.type, I8))
             if W > 1 and not isinstance(v.type, L.VectorType):
                 v = self.ml.splat(b, v, W)
-            p = self.gep(ptr, a.dtype, i)
-            if store_mask is None:
-                b.store(v, p, align=ALIGN[a.dtype])
-            elif W == 1:
-                with b.if_then(store_mask):
-                    b.store(v, p, align=ALIGN[a.dtype])
-            else:
-                b.call(self.ml.intrinsic(f"llvm.masked.store.{mangle(v.type)}.p0",
-                                         L.VoidType(), [v.type, PTR, I32, self.mask_ty]),
-                       [v, p, const(I32, ALIGN[a.dtype]), store_mask])
+            self.mem.store(arr, i, v, store_mask, how, masked)
 
-    def load_user_mask(self, i: L.Value, lanes: L.Value | None) -> L.Value:
-        ty = self.vec_ty("bool")
-        p = self.gep(self.user_mask, "bool", i)
-        if lanes is None:
-            m = self.b.load(p, typ=ty, align=1)
-        else:
-            m = self.masked_load(ty, p, 1, lanes)
-        return self.b.icmp_unsigned("!=", m, const(ty, 0))
+    def load_user_mask(self, i: L.Value, lanes: L.Value | None, how: str) -> L.Value:
+        m = self.mem.load(self.user_mask, i, lanes, how)
+        return self.b.icmp_unsigned("!=", m, const(m.type, 0))
 
-    def full_loop(self, entry: L.Block, head: L.Block, masked: bool, tail_bb: L.Block) -> None:
+    def full_loop(self, entry: L.Block, head: L.Block, mask: str, tail_bb: L.Block,
+                  how: str) -> None:
+        """The loop over full vectors from ``begin``, entered from ``entry``.  ``mask``:
+        "all" (every lane active), "masked" (the user's mask) or "either" (the user's mask
+        when given, a run-time choice); ``how`` the arrays are reached (see
+        :meth:`ArrayAccess.load`)."""
         b = self.b
         b.position_at_end(head)
         i = b.phi(I64, name="i")
         i.add_incoming(self.begin, entry)
-        body_bb = self.rng.append_basic_block(("masked" if masked else "all") + ".body")
+        body_bb = self.rng.append_basic_block(head.name.replace("head", "body"))
         b.cbranch(b.icmp_signed("<", i, self.full_end), body_bb, tail_bb)
         b.position_at_end(body_bb)
-        um = self.load_user_mask(i, None) if masked else None
-        results = self.call_body(i, um if masked else const(self.mask_ty, 1), None)
-        self.store_outs(i, results, um)
+        every = const(self.mask_ty, 1)
+        if mask == "all":
+            um, exec_mask = None, every
+        elif mask == "masked":
+            um = exec_mask = self.load_user_mask(i, None, how)
+        else:
+            um = exec_mask = self.mem.branch(
+                self.has_mask, lambda: self.load_user_mask(i, None, how), lambda: every)
+        results = self.call_body(i, exec_mask, None, how)
+        self.store_outs(i, results, um, how, self.has_mask if mask == "either" else None)
         i.add_incoming(b.add(i, const(I64, self.W)), b.block)
         b.branch(head)
 
@@ -185,12 +206,13 @@ class _RangeLoop:
         pre = b.block
         b.cbranch(self.has_mask, with_m, join)
         b.position_at_end(with_m)
-        um = b.and_(lanes, self.load_user_mask(full_end, lanes))
+        um = b.and_(lanes, self.load_user_mask(full_end, lanes, "any"))
+        with_m_end = b.block
         b.branch(join)
         b.position_at_end(join)
         exec_mask = b.phi(self.mask_ty)
         exec_mask.add_incoming(lanes, pre)
-        exec_mask.add_incoming(um, with_m)
-        results = self.call_body(full_end, exec_mask, lanes)
-        self.store_outs(full_end, results, exec_mask)
+        exec_mask.add_incoming(um, with_m_end)
+        results = self.call_body(full_end, exec_mask, lanes, "any")
+        self.store_outs(full_end, results, exec_mask, "any")
         b.branch(done)
