@@ -154,12 +154,12 @@ def load(path: str | os.PathLike, *, from_cache: bool = False,
         variant = manifest.get("variant")
     except (OSError, ValueError, KeyError, TypeError, AttributeError) as e:
         raise CompileError(f"{man}: not a valid rdsl manifest ({e})") from None
+    if variant is not None and variant not in MODELS:
+        raise CompileError(f"{man}: not a valid rdsl manifest (unknown variant `{variant}`)")
     if manifest.get("abi", 1) != ABI_VERSION:
         raise CompileError(f"{man}: built by rdsl {manifest.get('rdsl_version', '?')} for C ABI "
                            f"{manifest.get('abi', 1)}; this rdsl calls ABI {ABI_VERSION} "
                            "(strided arrays): recompile it")
-    if variant is not None and variant not in MODELS:
-        raise CompileError(f"{man}: not a valid rdsl manifest (unknown variant `{variant}`)")
     try:
         runnable = host_supports(get_target(target))
     except CompileError:
