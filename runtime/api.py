@@ -76,6 +76,9 @@ class Module:
         self.model: ColorModel | None = None if variant is None else MODELS[variant]
         self.from_cache = from_cache
         self.compile_seconds = compile_seconds
+        # the .rdsl files the kernels were compiled from (set by jit: what its cache key
+        # hashes), which `rdsl render --watch` watches
+        self.source_files: list[Path] = []
         self._lib = lib
         self.kernels: dict[str, Kernel] = {k["name"]: Kernel(self, k, lib)
                                            for k in manifest["kernels"]}
@@ -202,7 +205,9 @@ def jit(source_or_path: str | os.PathLike, target: str | Target = "host",
     root = cache_dir()
     entry = root / key
     if cache and entry_complete(entry):
-        return load(entry / STEM, from_cache=True, compile_seconds=time.perf_counter() - t0)
+        mod = load(entry / STEM, from_cache=True, compile_seconds=time.perf_counter() - t0)
+        mod.source_files = files
+        return mod
 
     from ..compiler import driver  # only now: a cache hit never imports the compiler
     from ..compiler.backends.clib import build_library
@@ -212,7 +217,9 @@ def jit(source_or_path: str | os.PathLike, target: str | Target = "host",
         tmp = Path(tempfile.mkdtemp(prefix="rdsl-jit-"))
         atexit.register(shutil.rmtree, tmp, True)
         build_library(module, build.target, tmp, STEM)
-        return load(tmp / STEM, compile_seconds=time.perf_counter() - t0)
+        mod = load(tmp / STEM, compile_seconds=time.perf_counter() - t0)
+        mod.source_files = files
+        return mod
     try:
         root.mkdir(parents=True, exist_ok=True)
         tmp = Path(tempfile.mkdtemp(prefix=f".{key[:16]}-", dir=root))
@@ -239,4 +246,6 @@ def jit(source_or_path: str | os.PathLike, target: str | Target = "host",
                 shutil.rmtree(tmp, ignore_errors=True)
             else:
                 entry = tmp
-    return load(entry / STEM, compile_seconds=time.perf_counter() - t0)
+    mod = load(entry / STEM, compile_seconds=time.perf_counter() - t0)
+    mod.source_files = files
+    return mod

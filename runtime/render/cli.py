@@ -1,5 +1,6 @@
 """``rdsl render``: load a scene, compile its kernels (or load them from the cache), render
-with a progress bar, write EXR plus a PNG preview, and end with a one-line summary.
+with a progress bar, write EXR plus a PNG preview, and end with a one-line summary; with
+``--watch``, go on rendering on each change of the scene or its plugins (watch.py).
 
 :func:`add_commands` declares the subcommand on the top-level parser of ``rdsl/cli.py``."""
 
@@ -14,7 +15,7 @@ from typing import Any
 
 from ...compiler.diagnostics import CompileError
 from ...core.color import VARIANTS
-from .image import write_exr, write_png
+from .image import write_render
 from .progress import summary_line
 
 
@@ -36,11 +37,15 @@ def add_commands(sub: argparse._SubParsersAction) -> dict[str, Callable[[Any], i
                    help="set a scene parameter declared with <default>")
     r.add_argument("--report", action="store_true",
                    help="print what specialization did and the kernel sizes")
-    r.add_argument("--no-specialize", dest="specialize", action="store_false",
-                   help="the generic build: parameters read at run time, every emitter kind")
+    r.add_argument("--specialize", action=argparse.BooleanOptionalAction, default=None,
+                   help="--no-specialize: the generic build, parameters read at run time, "
+                        "every emitter kind (default: specialized, generic with --watch)")
     r.add_argument("--triangulate", action="store_true",
                    help="render spheres and disks as triangle meshes, not analytic shapes")
     r.add_argument("--quiet", action="store_true", help="no progress bar")
+    r.add_argument("--watch", action="store_true",
+                   help="after the image, render again whenever the scene, a file it reads "
+                        "or a plugin's .rdsl source changes, until Ctrl-C")
     return {"render": render_command}
 
 
@@ -56,14 +61,17 @@ def render_command(args: Any) -> int:
     out = Path(args.output) if args.output else Path(scene_path.stem + ".exr")
     if out.suffix.lower() != ".exr":
         out = out.with_suffix(".exr")
-    png = out.with_suffix(".png")
-    for target in (out, png):
+    for target in (out, out.with_suffix(".png")):
         if target.resolve() == scene_path.resolve():
             raise CompileError(f"{target}: error: refusing to overwrite the input scene")
     defines = parse_defines(args.defines)
+    watching = getattr(args, "watch", False)
+    specialize = getattr(args, "specialize", None)
+    if specialize is None:  # --watch: editing a parameter value then never compiles
+        specialize = not watching
 
     t0 = time.perf_counter()
-    scene = load_scene(scene_path, build=build, specialize=getattr(args, "specialize", True),
+    scene = load_scene(scene_path, build=build, specialize=specialize,
                        triangulate=getattr(args, "triangulate", False), **defines)
     t_load = time.perf_counter() - t0
     if not scene.buffers.nlight:
@@ -73,14 +81,7 @@ def render_command(args: Any) -> int:
     how = "kernels from cache" if scene.from_cache else \
         f"compiled in {scene.compile_seconds:.2f} s"
     if args.report:
-        for line in scene.report:
-            print(f"specialize: {line}")
-        spec, generic = scene.instruction_counts()
-        print(f"render_sample: {spec} instructions specialized, {generic} generic "
-              f"({100 * (spec - generic) / generic:+.0f}%)")
-        k = mod.manifest["kernels"]
-        print(f"kernels: {', '.join(x['name'] for x in k)} for `{mod.target}` "
-              f"(width {mod.width}, variant {scene.build.model.name})")
+        _print_report(scene, mod)
     spp = args.spp or scene.spp
     t1 = time.perf_counter()
     img = scene.render(spp=spp, seed=args.seed, threads=args.threads,
@@ -91,16 +92,27 @@ def render_command(args: Any) -> int:
               "the image", file=sys.stderr)
     try:
         out.parent.mkdir(parents=True, exist_ok=True)
-        # channels past the radiance are AOVs (an `aov` integrator), one EXR channel each
-        names = scene.channel_names
-        base = 1 if names[0] == "Y" else 3
-        write_exr(out, img[..., :base], extra={n: img[..., i]
-                                               for i, n in enumerate(names) if i >= base})
-        write_png(png, img[..., :base])
+        png = write_render(out, img, scene.channel_names)
     except OSError as e:
         raise CompileError(f"{out}: error: cannot write the image: {e.strerror or e}") from None
     h, w = img.shape[:2]
     paths = h * w * spp
     print(summary_line(f"{scene_path.name}: {w}x{h}, {spp} spp", t_render, paths, "paths",
-                       f"scene {t_load:.2f} s, {how}; wrote {out} and {png.name}"))
-    return 0
+                       f"scene {t_load:.2f} s, {how}; wrote {out} and {png.name}"), flush=True)
+    if not watching:
+        return 0
+    from .watch import WatchJob, watch
+
+    return watch(scene, WatchJob(out, args.spp, args.seed, args.threads, t_render / spp))
+
+
+def _print_report(scene: Any, mod: Any) -> None:
+    """``--report``: what specialization did, and the kernels' sizes."""
+    for line in scene.report:
+        print(f"specialize: {line}")
+    spec, generic = scene.instruction_counts()
+    print(f"render_sample: {spec} instructions specialized, {generic} generic "
+          f"({100 * (spec - generic) / generic:+.0f}%)")
+    k = mod.manifest["kernels"]
+    print(f"kernels: {', '.join(x['name'] for x in k)} for `{mod.target}` "
+          f"(width {mod.width}, variant {scene.build.model.name})")

@@ -6,6 +6,7 @@ Images are numpy arrays of shape (H, W, C) (or (H, W) for one channel), row 0 at
 
 from __future__ import annotations
 
+import os
 import struct
 import zlib
 from pathlib import Path
@@ -14,7 +15,7 @@ from typing import Any
 import numpy as np
 
 __all__ = ["read_exr", "read_exr_channels", "rmse", "srgb_encode", "write_exr", "write_image",
-           "write_png"]
+           "write_png", "write_render"]
 
 _BASE_NAMES = {1: ("Y",), 3: ("R", "G", "B"), 4: ("R", "G", "B", "A")}
 _ORDER = {"R": 0, "G": 1, "B": 2, "A": 3, "Y": 0}
@@ -136,6 +137,30 @@ def write_image(path: str | Path, img: Any, **kwargs: Any) -> None:
         write_png(path, img, **kwargs)
     else:
         raise ValueError(f"cannot write `{path}`: use a .exr or .png file name")
+
+
+def write_render(exr: Path, img: np.ndarray, channel_names: list[str]) -> Path:
+    """Write a render as ``exr`` (radiance, then one channel per AOV: ``channel_names``
+    past the first one or three) and a tonemapped PNG beside it, which it returns.  Each
+    file is written under a temporary name in its folder and renamed over the old one, so
+    a viewer that reloads the image never reads half of it."""
+    png = exr.with_suffix(".png")
+    base = 1 if channel_names[0] == "Y" else 3
+    aovs = {n: img[..., i] for i, n in enumerate(channel_names) if i >= base}
+    _replace(exr, lambda tmp: write_exr(tmp, img[..., :base], extra=aovs))
+    _replace(png, lambda tmp: write_png(tmp, img[..., :base]))
+    return png
+
+
+def _replace(path: Path, write: Any) -> None:
+    """``write(tmp)`` to a temporary file beside ``path``, then rename it to ``path``."""
+    tmp = path.with_name(f".{path.stem}.{os.getpid()}.tmp{path.suffix}")
+    try:
+        write(tmp)
+        os.replace(tmp, path)
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
 
 
 def rmse(a: Any, b: Any) -> float:

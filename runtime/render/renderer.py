@@ -10,8 +10,10 @@ called from the kernel), shading, light sampling and the film's reconstruction f
 
 from __future__ import annotations
 
+import hashlib
 import time
 import warnings
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -25,6 +27,7 @@ from ...compiler.targets import Target
 from ...core.color import RGB, ColorModel
 from ...core.scene_spec import Instance, SceneSpec
 from ..scene import load_scene_description
+from ..scene.reads import recording
 from .bsdfs import (
     bsdf_instance,
     dispersion_warnings,
@@ -45,6 +48,10 @@ from .textures import TextureTable
 
 # samples per kernel call: small enough that a batch's sample buffers stay in cache
 BATCH_SAMPLES = 1 << 17
+
+
+class RenderCancelled(Exception):
+    """``Scene.render``'s ``cancel`` asked it to stop."""
 
 
 @dataclass
@@ -161,6 +168,18 @@ def flatten(desc: Any, triangulate: bool = False, model: ColorModel = RGB
     return bufs, bsdfs, emitters
 
 
+def _geometry_key(bufs: SceneBuffers) -> str:
+    """A hash of what the Embree scene is built from: each shape's kind and size, the
+    vertices and analytic shapes' records (both in ``P``) and the triangles."""
+    h = hashlib.sha256()
+    for m in bufs.meshes:
+        h.update(repr(tuple(np.shape(a) for a in m) if isinstance(m, tuple)
+                      else type(m).__name__).encode())
+    h.update(bufs.P.tobytes())
+    h.update(bufs.F.tobytes())
+    return h.hexdigest()
+
+
 def _shape_kind(flags: int) -> int:
     """geometry.rdsl's shape kind (0 mesh, 1 sphere, 2 disk) from G's flags."""
     return next((SHAPE_KINDS[k] for k, bit in SHAPE_FLAGS.items() if flags & bit), 0)
@@ -184,26 +203,54 @@ class Scene:
 
     def __init__(self, path: str | Path, build: Build, specialize: bool = True,
                  triangulate: bool = False, **defaults: Any) -> None:
-        from ..embree import EmbreeScene
-
         self.path = Path(path)
         self.build = build
-        model = build.model
+        self.specialize = specialize
+        self.triangulate = triangulate
+        self.defaults = defaults
+        self._read(None)
+
+    def reload(self) -> Scene:
+        """The scene read again from its files (after an edit), as a new Scene.  Mesh and
+        image files that did not change are not parsed again, and the Embree scene is
+        shared when the geometry is unchanged (``geometry_reused``); the kernels come from
+        the cache unless what they are compiled from changed."""
+        new = Scene.__new__(Scene)
+        new.path, new.build, new.specialize = self.path, self.build, self.specialize
+        new.triangulate, new.defaults = self.triangulate, self.defaults
+        new._read(self)
+        return new
+
+    def _read(self, previous: Scene | None) -> None:
+        """Load the scene's files, flatten them and build the Embree scene (``previous``:
+        the load this one replaces, whose unchanged parts are reused)."""
+        from ..embree import EmbreeScene
+
+        model = self.build.model
         t0 = time.perf_counter()
-        self.desc = load_scene_description(self.path, **defaults)
-        self.spp = int(self.desc.sensor.sampler.params.get("sample_count", 4))
-        self.seed = int(self.desc.sensor.sampler.params.get("seed", 0))
-        integrator_plan(self.desc.integrator).check_variant(model)
-        self.buffers, self.bsdfs, self.emitters = flatten(self.desc, triangulate, model)
+        # self.reads: every file the load read (rdsl render --watch watches them), even
+        # when it fails part way
+        with recording(previous.reads if previous is not None else None) as self.reads:
+            self.desc = load_scene_description(self.path, **self.defaults)
+            self.spp = int(self.desc.sensor.sampler.params.get("sample_count", 4))
+            self.seed = int(self.desc.sensor.sampler.params.get("seed", 0))
+            integrator_plan(self.desc.integrator).check_variant(model)
+            self.buffers, self.bsdfs, self.emitters = flatten(self.desc, self.triangulate,
+                                                              model)
         for message in [*polarization_warnings(self.desc, model),
                         *dispersion_warnings(self.desc, model)]:
-            warnings.warn(message, stacklevel=2)
+            warnings.warn(message, stacklevel=3)
         self.load_seconds = time.perf_counter() - t0
-        # two levels (a BVH per shape under one over the shapes): scenes of a few large
-        # shapes, such as the Cornell box, trace about a third faster than through one BVH
-        # over all triangles (bench/render_vs_mitsuba.py)
-        self.embree = EmbreeScene(self.buffers.meshes, quality="low", mesh_quality="high")
-        self.specialize = specialize
+        self.geometry_key = _geometry_key(self.buffers)
+        self.geometry_reused = previous is not None and \
+            previous.geometry_key == self.geometry_key
+        if self.geometry_reused:
+            self.embree = previous.embree
+        else:
+            # two levels (a BVH per shape under one over the shapes): scenes of a few large
+            # shapes, such as the Cornell box, trace about a third faster than through one
+            # BVH over all triangles (bench/render_vs_mitsuba.py)
+            self.embree = EmbreeScene(self.buffers.meshes, quality="low", mesh_quality="high")
         self.params = np.zeros(1, np.float32)  # PRM of the generic build
         self._module = None
         self.report: list[str] = []
@@ -211,11 +258,12 @@ class Scene:
         self.from_cache = False
         self.nonfinite = 0
 
-    def compile(self):
-        """Compile (or load from the cache) the scene's kernels."""
+    def compile(self, again: bool = False):
+        """Compile (or load from the cache) the scene's kernels; ``again``: even if they
+        were (a source they import changed: the cache key tells whether it did)."""
         from ...runtime.api import jit
 
-        if self._module is not None:
+        if self._module is not None and not again:
             return self._module
         src = kernel_source(self.desc, self.buffers, self.bsdfs, self.emitters,
                             self.build.model)
@@ -283,7 +331,11 @@ class Scene:
         return base + integrator_plan(self.desc.integrator).aov_channel_names()
 
     def render(self, spp: int | None = None, seed: int | None = None,
-               threads: int | None = None, progress: bool = False) -> np.ndarray:
+               threads: int | None = None, progress: bool = False,
+               cancel: Callable[[], bool] | None = None) -> np.ndarray:
+        """The image at ``spp`` samples per pixel.  ``cancel`` is asked after each batch
+        of samples (none is running then): once it answers True the render stops with
+        :class:`RenderCancelled` (rdsl render --watch drops a render an edit made stale)."""
         spp = int(spp or self.spp)
         seed = self.seed if seed is None else int(seed)
         mod = self.compile()
@@ -326,6 +378,9 @@ class Scene:
                 waiting = (outs[k % 2], n)
                 done += n
                 k += 1
+                if cancel is not None and cancel():
+                    bar.finish()
+                    raise RenderCancelled(f"cancelled after {done} of {spp} spp")
         bar.finish()
         return develop(acc, dict(film, spp=spp))
 

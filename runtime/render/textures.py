@@ -25,6 +25,7 @@ import numpy as np
 from ...compiler.diagnostics import CompileError
 from ...core.color import RGB, ColorModel
 from ...core.scene_spec import Instance, SpectrumValue, TextureRef
+from ..scene.reads import memoized
 from .colors import encode_texels, spectrum_value
 
 # Mitsuba plugin -> rdsl file under stdlib/
@@ -54,8 +55,12 @@ def _pillow() -> Any:
 
 def load_bitmap(path: str | Path, raw: bool = False) -> np.ndarray:
     """An image file as linear RGB float32 of shape (H, W, 3), row 0 at the top.  Grey
-    images are broadcast to RGB and alpha is dropped."""
-    path = Path(path)
+    images are broadcast to RGB and alpha is dropped.  A scene reload reuses the array of
+    an unchanged file (runtime/scene/reads.py): callers must not modify it."""
+    return memoized(path, ("bitmap", raw), lambda: _read_bitmap(Path(path), raw))
+
+
+def _read_bitmap(path: Path, raw: bool) -> np.ndarray:
     if path.suffix.lower() == ".exr":
         from .image import read_exr
 

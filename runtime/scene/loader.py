@@ -25,6 +25,7 @@ from . import transform as xf
 from .analytic import Analytic
 from .errors import scene_error
 from .meshes import Mesh, MeshError
+from .reads import memoized
 from .schema import (
     AOV_TYPES,
     BITMAP_FORMATS,
@@ -296,12 +297,8 @@ class _Builder:
         else:
             path = self.file(node, "filename", "mesh")
             try:
-                if obj.type == "obj":
-                    mesh = meshes.load_obj(path, p["flip_tex_coords"])
-                elif obj.type == "ply":
-                    mesh = meshes.load_ply(path, p["flip_tex_coords"])
-                else:
-                    mesh = meshes.load_serialized(path, p["shape_index"])
+                mesh = memoized(path, (obj.type, p.get("flip_tex_coords"),
+                                       p.get("shape_index")), lambda: _read_mesh(obj, path))
             except MeshError as e:
                 raise scene_error(f"{self.what(node)}: cannot load mesh file '{p['filename']}':"
                                   f" {e}", _loc(node, "filename")) from None
@@ -510,6 +507,16 @@ class _Builder:
         if obj.params["sample_count"] <= 0:
             raise scene_error("sampler: 'sample_count' must be positive",
                               _loc(node, "sample_count"))
+
+
+def _read_mesh(obj: Shape, path: Path) -> Mesh:
+    """A mesh file parsed (``to_world`` not applied: the result is shared by reloads)."""
+    p = obj.params
+    if obj.type == "obj":
+        return meshes.load_obj(path, p["flip_tex_coords"])
+    if obj.type == "ply":
+        return meshes.load_ply(path, p["flip_tex_coords"])
+    return meshes.load_serialized(path, p["shape_index"])
 
 
 def _param_str(node: ObjectNode, name: str) -> str:

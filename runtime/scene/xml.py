@@ -29,6 +29,7 @@ from ...compiler.diagnostics import register_source
 from ...compiler.ir import Loc
 from . import transform as xf
 from .errors import file_loc, scene_error
+from .reads import first_file, note
 from .spectra import Color, parse_numbers, parse_rgb, parse_spectrum, read_spd, spectrum_to_srgb
 
 OBJECT_TAGS = ("shape", "bsdf", "texture", "emitter", "integrator", "sensor", "film",
@@ -72,6 +73,7 @@ class Element:
 def parse_xml_file(path: Path, loc: Loc | None = None) -> Element:
     """Parse ``path`` with expat; malformed XML is a :class:`SceneError` at its line."""
     path = Path(path)
+    note(path)
     try:
         data = path.read_bytes()
     except OSError as e:
@@ -153,9 +155,9 @@ class SceneTree:
         p = Path(name)
         candidates = [p] if p.is_absolute() else [
             base_dir / p, self.path.parent / p, *(d / p for d in self.search_paths)]
-        for c in candidates:
-            if c.is_file():
-                return c
+        found = first_file(candidates)
+        if found is not None:
+            return found
         looked = ", ".join(dict.fromkeys(str(c.parent) for c in candidates))
         raise scene_error(f"{what} file '{name}' not found (looked in: {looked})", loc)
 
@@ -311,7 +313,7 @@ class _Reader:
         p = Path(name)
         cands = [p] if p.is_absolute() else [Path(el.loc.file).parent / p,
                                               *(d / p for d in self.search_paths)]
-        target = next((c for c in cands if c.is_file()), None)
+        target = first_file(cands)
         if target is None:
             raise scene_error(f"<include>: file '{name}' not found (looked in: "
                               f"{', '.join(str(c.parent) for c in cands)})", el.loc)
@@ -338,6 +340,7 @@ class _Reader:
                 raise scene_error(f"{what}: give either 'value' or 'filename', not both", el.loc)
             path = Path(a["filename"])
             path = path if path.is_absolute() else Path(el.loc.file).parent / path
+            note(path)
             if not path.is_file():
                 raise scene_error(f"{what}: spectrum file '{a['filename']}' not found", el.loc)
             wl, vals = read_spd(path, el.loc)
