@@ -15,6 +15,7 @@ from pathlib import Path
 from typing import Any
 
 from ...compiler.diagnostics import CompileError
+from ...compiler.ir import Loc
 from ...core.color import VARIANTS
 from .common import Options
 from .harness import KINDS, Declaration, Harness, declarations
@@ -37,29 +38,35 @@ def add_commands(sub: argparse._SubParsersAction) -> dict[str, Callable[[Any], i
     return {"test-plugin": test_plugin_command}
 
 
+def _at(path: Path | str, line: int = 0, col: int = 0) -> Loc:
+    """A diagnostic's location: a file (line 0) or a line of it."""
+    return Loc(str(path), line, col)
+
+
 def choose(path: Path, wanted: str | None) -> Declaration:
     """The plugin of ``path`` to test: the only one it declares, or the one named."""
     if path.suffix != ".rdsl":
-        raise CompileError(f"{path}: error: expected a plugin's .rdsl file")
+        raise CompileError("expected a plugin's .rdsl file", _at(path))
     if not path.is_file():
-        raise CompileError(f"{path}: error: no such file")
+        raise CompileError("no such file", _at(path))
     found = declarations(path)
     if wanted is not None:
         named = [d for d in found if d.name == wanted]
         if not named:
-            raise CompileError(f"{path}: error: no plugin `{wanted}` here (declared: "
-                               f"{', '.join(d.name for d in found) or 'none'})")
+            raise CompileError(f"no plugin `{wanted}` here (declared: "
+                               f"{', '.join(d.name for d in found) or 'none'})", _at(path))
         found = named
     if not found:
-        raise CompileError(f"{path}: error: the file declares no plugin; expected "
-                           "`bsdf NAME {`, `emitter NAME {` or `texture NAME {`")
+        raise CompileError("the file declares no plugin; expected `bsdf NAME {`, "
+                           "`emitter NAME {` or `texture NAME {`", _at(path))
     if len(found) > 1:
-        raise CompileError(f"{path}: error: the file declares several plugins ("
-                           f"{', '.join(d.name for d in found)}); choose one with --plugin")
+        raise CompileError(f"the file declares several plugins ("
+                           f"{', '.join(d.name for d in found)}); choose one with --plugin",
+                           _at(path))
     decl = found[0]
     if decl.kind not in KINDS:
-        raise CompileError(f"{decl.where}: error: `rdsl test-plugin` tests "
-                           f"{', '.join(KINDS)} plugins, not {decl.kind} `{decl.name}`")
+        raise CompileError(f"`rdsl test-plugin` tests {', '.join(KINDS)} plugins, not "
+                           f"{decl.kind} `{decl.name}`", _at(path, decl.line, 1))
     return decl
 
 
@@ -96,16 +103,16 @@ def parse_params(items: list[str], decl: Declaration) -> dict[str, Any]:
         name, eq, text = item.partition("=")
         name = name.strip()
         if not eq:
-            raise CompileError(f"error: -p {item}: expected NAME=VALUE")
+            raise CompileError(f"-p {item}: expected NAME=VALUE")
         if name not in declared:
-            raise CompileError(f"error: -p {item}: {decl.kind} `{decl.name}` ({decl.where}) "
+            raise CompileError(f"-p {item}: {decl.kind} `{decl.name}` ({decl.where}) "
                                f"has no param `{name}` (its params: "
                                f"{', '.join(declared) or 'none'})")
         p = declared[name]
         try:
             out[name] = _value(text.strip(), p.type)
         except ValueError:
-            raise CompileError(f"error: -p {item}: param `{name}` ({p.loc}) is a {p.type}; "
+            raise CompileError(f"-p {item}: param `{name}` ({p.loc}) is a {p.type}; "
                                f"`{text}` is not one") from None
     return out
 
@@ -126,7 +133,7 @@ def test_plugin_command(args: Any) -> int:
     build = Build.of(args.target, args.variant)  # a bad name fails before the file is read
     decl = choose(Path(args.file), args.plugin)
     if args.samples < 1000:
-        raise CompileError(f"error: --samples {args.samples}: at least 1000 are needed")
+        raise CompileError(f"--samples {args.samples}: at least 1000 are needed")
     opts = Options(samples=args.samples, params=parse_params(args.params, decl))
     h = Harness(variant=build.model.name, target=build.target, decl=decl)
     t0 = time.perf_counter()

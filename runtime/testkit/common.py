@@ -70,14 +70,16 @@ def sphere_sweep(n: int, seed: Any) -> np.ndarray:
 
 def _extremes(ptype: str, value: Any) -> list[Any]:
     """Values at the edges of a parameter's plausible range, from its type and default:
-    colours 0 and 1; a Float in (0, 1] (a roughness, a weight) 1e-4 and 1; a Float above 1
-    (an index of refraction) 1 and 1.0001; booleans both.  Ints (enumerations) and vectors
-    keep their values: what their edges are is the plugin's own business."""
-    if ptype in ("Spectrum", "Texture"):
+    a Texture (a reflectance, a transmittance) 0 and 1; a Float or a Spectrum in (0, 1] (a
+    roughness, a weight, an extinction coefficient) 1e-4 and 1, above 1 (an index of
+    refraction) 1 and 1.0001; booleans both.  Ints (enumerations), vectors and parameters
+    at 0 or below (off, or a "same as" sentinel) keep their values: what their edges are is
+    the plugin's own business."""
+    if ptype == "Texture":
         return [0.0, 1.0]
     if ptype == "Bool":
         return [not value]
-    if ptype == "Float" and isinstance(value, (int, float)):
+    if ptype in ("Float", "Spectrum") and isinstance(value, (int, float)):
         if 0 < value <= 1:
             return [1e-4, 1.0]
         if value > 1:

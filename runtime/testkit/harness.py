@@ -36,6 +36,7 @@ from typing import Any
 import numpy as np
 
 from ...compiler.diagnostics import CompileError
+from ...compiler.ir import Loc
 from ...compiler.passes.specialize import parameter_slots
 from ...core.color import MODELS
 from ...core.scene_spec import Instance, SceneSpec, SpectrumValue
@@ -109,7 +110,7 @@ class Param:
     name: str
     type: str
     default: Any
-    loc: str
+    loc: Loc
 
 
 @dataclass(frozen=True)
@@ -141,7 +142,7 @@ def declarations(path: str | Path) -> list[Declaration]:
     for pl in program.plugins:
         if pl.module.key != main:
             continue
-        params = tuple(Param(s.name, type_name(s.type), d, str(s.loc))
+        params = tuple(Param(s.name, type_name(s.type), d, s.loc)
                        for s, d in zip(pl.params, pl.defaults))
         out.append(Declaration(pl.kind, pl.name, path, pl.decl.loc.line, params,
                                tuple(pl.fns)))
@@ -167,9 +168,10 @@ def _harness_source(decl: Declaration) -> tuple[str, str]:
     so that ``import STEM;`` finds the plugin and the kernel cache hashes the file)."""
     stem = decl.path.stem
     if not stem.isidentifier():
-        raise CompileError(f"{decl.path}: error: `rdsl test-plugin` imports the file as a "
-                           f"module, so its name must be an identifier (letters, digits and "
-                           f"`_`, not starting with a digit), e.g. `{_identifier(stem)}.rdsl`")
+        raise CompileError(f"`rdsl test-plugin` imports the file as a module, so its name "
+                           f"must be an identifier (letters, digits and `_`, not starting "
+                           f"with a digit), e.g. `{_identifier(stem)}.rdsl`",
+                           Loc(str(decl.path), 0, 0))
     body = {"bsdf": _BSDF, "emitter": _EMITTER,
             "texture": _TEXTURE + (_TEXTURE_1 if "eval_1" in decl.methods else "")}[decl.kind]
     text = (_PRELUDE + body + _WAVELENGTHS).format(imports=f"import {stem};")
@@ -205,9 +207,8 @@ class Harness:
         for k, p in declared.items():
             v = params.get(k, p.default)
             if v is None:
-                raise CompileError(f"{p.loc}: error: param `{k}` of {self.decl.kind} "
-                                   f"`{self.name}` has no default; give it a value "
-                                   f"(`-p {k}=VALUE`)")
+                raise CompileError(f"param `{k}` of {self.decl.kind} `{self.name}` has no "
+                                   f"default; give it a value (`-p {k}=VALUE`)", p.loc)
             if p.type in ("Spectrum", "Texture") and isinstance(v, (tuple, list, np.ndarray)):
                 v = SpectrumValue(tuple(float(x) for x in v))
             out[k] = v
