@@ -132,7 +132,7 @@ def test_edited_plugin_is_recompiled(capsys, tmp_path):
 def test_params_override_defaults(capsys, tmp_path):
     """-p sets a param: a reflectance of 0.6 makes the broken albedo 0.9, which passes."""
     path = lambert(tmp_path, "override", **BROKEN["albedo"][0])
-    rc, rows, out = run(capsys, str(path), "-p", "reflectance=0.6,0.5,0.4")
+    rc, _, out = run(capsys, str(path), "-p", "reflectance=0.6,0.5,0.4")
     assert rc == 0, out
 
 
