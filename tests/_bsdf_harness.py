@@ -20,7 +20,7 @@ from rdsl.core.color import VARIANTS  # noqa: F401 (for the tests)
 from rdsl.core.scene_spec import SceneSpec, SpectrumValue
 from rdsl.runtime.render.bsdfs import BSDF_PLUGINS, bsdf_instance, split_leaves
 from rdsl.runtime.scene.loader import load_scene_description
-from rdsl.runtime.testkit.harness import SOURCE, Harness
+from rdsl.runtime.testkit.harness import SOURCE, Declaration, Harness
 
 STDLIB = Path(rdsl.__file__).resolve().parent / "stdlib"
 IOR_DIR = STDLIB / "data" / "ior"
@@ -52,7 +52,9 @@ class _SceneBsdf(Harness):
     """Shape k's BSDF of a :class:`SceneBsdfs`: its parameters are the scene's."""
 
     def __init__(self, owner: SceneBsdfs, k: int) -> None:
-        super().__init__("mixture", owner.variant, owner.target)
+        # the scene's own dispatch: no plugin declaration of its own to read params from
+        decl = Declaration("bsdf", "mixture", STDLIB / "bsdf" / "mixture.rdsl", 0, (), ())
+        super().__init__(variant=owner.variant, target=owner.target, decl=decl)
         self.owner, self.ident = owner, k
 
     def module(self, params: dict[str, Any]) -> tuple[Any, np.ndarray]:
