@@ -1,5 +1,5 @@
 """The ``rdsl`` command line: the compiler's ``check``, ``ir`` and ``compile`` and the
-runtime's ``render``, on one parser.
+runtime's ``render`` and ``test-plugin``, on one parser.
 
 It sits above both layers, so that the compiler never imports the runtime.  User mistakes
 print diagnostics and exit with status 1; they never show a traceback.
@@ -16,6 +16,7 @@ from .compiler import cli as compiler_cli
 from .compiler.diagnostics import CompileError
 from .compiler.driver import InternalError
 from .runtime.render import cli as render_cli
+from .runtime.testkit import cli as testkit_cli
 
 
 def parser() -> tuple[argparse.ArgumentParser, dict[str, Callable[[Any], int]]]:
@@ -23,7 +24,8 @@ def parser() -> tuple[argparse.ArgumentParser, dict[str, Callable[[Any], int]]]:
     p = argparse.ArgumentParser(prog="rdsl", description="A compiler for physically based "
                                 "rendering.")
     sub = p.add_subparsers(dest="cmd", required=True)
-    commands = {**compiler_cli.add_commands(sub), **render_cli.add_commands(sub)}
+    commands = {**compiler_cli.add_commands(sub), **render_cli.add_commands(sub),
+                **testkit_cli.add_commands(sub)}
     return p, commands
 
 

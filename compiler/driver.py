@@ -101,4 +101,4 @@ def compile_kernels(source_or_path: str | Path, build: Build, filename: str | No
     module = frontend(source_or_path, filename)
     run_passes(module, pipeline(build, scene, report))
     module.attrs["target"] = build.target.name
-    return module, source_files(source_or_path)
+    return module, source_files(source_or_path, filename)

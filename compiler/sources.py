@@ -45,9 +45,10 @@ def read_source(source_or_path: str | os.PathLike) -> tuple[str, Path | None]:
         raise CompileError(f"cannot read `{path}`: {why}") from None
 
 
-def source_files(source_or_path: str | Path) -> list[Path]:
+def source_files(source_or_path: str | Path, filename: str | None = None) -> list[Path]:
     """The main file (if any), everything it imports, and the prelude, resolved the way the
-    frontend resolves imports.  Used to key the kernel cache."""
+    frontend resolves imports.  Used to key the kernel cache.  Source text that the frontend
+    compiles under a ``filename`` imports from that file's folder, as the frontend does."""
     files: list[Path] = []
     seen: set[Path] = set()
 
@@ -70,7 +71,8 @@ def source_files(source_or_path: str | Path) -> list[Path]:
     if is_path(source_or_path):
         visit(Path(source_or_path))
     else:
-        scan(str(source_or_path), Path.cwd())
+        named = filename is not None and not filename.startswith("<")
+        scan(str(source_or_path), Path(filename).parent if named else Path.cwd())
     for name in PRELUDE:
         visit(STDLIB / f"{name}.rdsl")
     return files

@@ -197,7 +197,7 @@ def jit(source_or_path: str | os.PathLike, target: str | Target = "host",
     t0 = time.perf_counter()
     build = build or Build.of(target, variant)
     text = _source_text(source_or_path)
-    files = [Path(f) for f in source_files(source_or_path)]
+    files = [Path(f) for f in source_files(source_or_path, options.get("filename"))]
     # the file name only labels diagnostics, and a cached build had none: scenes copied to
     # another directory share their kernels
     keyed = {k: v for k, v in options.items() if k != "filename"}

@@ -15,7 +15,7 @@ roughdielectric, plastic, roughplastic, blend_example):
 
 Every test runs in the five variants (mono, rgb, spectral, mono_polarized,
 spectral_polarized): each plugin is called as the renderer calls it, through the scene
-dispatch of a kernel that first sets the sample's wavelengths (tests/_bsdf_harness.py).
+dispatch of a kernel that first sets the sample's wavelengths (rdsl.runtime.testkit.harness).
 Values compared are the intensity ([0][0] of the Mueller matrix in polarized variants); the
 whole Mueller matrix must be finite, and equal eval / pdf for a sample. A colour is a
 variant's own: its luminance in mono, and in spectral variants the Jakob & Hanika upsampling
@@ -36,8 +36,8 @@ import numpy as np
 import pytest
 import rdsl
 from _bsdf_harness import VARIANTS, Harness, colour_at, ior_table
-from _chi2 import beckmann_g1_exact, beckmann_g1_fit, chi2_directions
 from rdsl.core.scene_spec import SpectrumValue
+from rdsl.runtime.testkit.chi2 import beckmann_g1_exact, beckmann_g1_fit, chi2_directions
 
 BSDF_DIR = Path(__file__).resolve().parents[1] / "stdlib" / "bsdf"
 PLUGINS = ["diffuse", "roughconductor", "conductor", "dielectric", "thindielectric",

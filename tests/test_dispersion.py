@@ -27,9 +27,9 @@ import warnings
 import numpy as np
 import pytest
 from _bsdf_harness import VARIANTS, Harness
-from _chi2 import chi2_directions
 from rdsl.compiler.diagnostics import CompileError
 from rdsl.core import spectral as S
+from rdsl.runtime.testkit.chi2 import chi2_directions
 from test_bsdf_plugins import fresnel_np, pdf_fn, rng, sample, surface, tile, wi_at
 
 f32 = np.float32
