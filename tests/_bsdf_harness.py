@@ -39,7 +39,8 @@ from rdsl.compiler.passes.specialize import parameter_slots
 from rdsl.core import spectral as S
 from rdsl.core.color import MODELS, VARIANTS  # noqa: F401 (VARIANTS: for the tests)
 from rdsl.core.scene_spec import Instance, SceneSpec, SpectrumValue
-from rdsl.runtime.render.bsdfs import BSDF_PLUGINS, bsdf_instance, split_leaves
+from rdsl.runtime.plugins import stdlib_plugin
+from rdsl.runtime.render.bsdfs import bsdf_instance, split_leaves
 from rdsl.runtime.scene.loader import load_scene_description
 
 STDLIB = Path(rdsl.__file__).resolve().parent / "stdlib"
@@ -83,9 +84,10 @@ fn h_wavelengths(ul: Float) -> Vec4 {{
 
 
 @cache
-def plugin_defaults(name: str) -> dict[str, tuple[str, Any]]:
-    """The plugin's params: name -> (type, default), read from its source."""
-    src = (STDLIB / "bsdf" / f"{name}.rdsl").read_text()
+def plugin_defaults(name: str, path: Path | None = None) -> dict[str, tuple[str, Any]]:
+    """The plugin's params: name -> (type, default), read from its source (the stdlib's, or
+    the user plugin file ``path``)."""
+    src = (path or STDLIB / "bsdf" / f"{name}.rdsl").read_text()
     out: dict[str, tuple[str, Any]] = {}
     for pname, ptype, default in re.findall(r"^\s*param\s+(\w+)\s*:\s*(\w+)\s*=\s*([^;]+);",
                                             src, re.MULTILINE):
@@ -106,15 +108,18 @@ class Harness:
 
     ident = 0  # the scene's BSDF that the kernels call
 
-    def __init__(self, name: str, variant: str = "rgb", target: str = "host") -> None:
+    def __init__(self, name: str, variant: str = "rgb", target: str = "host",
+                 path: str | Path | None = None) -> None:
+        """``path``: the file of a user plugin ``name`` (default: the stdlib's plugin)."""
         self.name, self.variant, self.target = name, variant, target
+        self.path = Path(path).resolve() if path is not None else None
         self.model = MODELS[variant]
         self.polarized, self.spectral = self.model.polarized, self.model.spectral
         self._mods: dict[str, Any] = {}
 
     # -- compilation ---------------------------------------------------------------------
     def _params(self, params: dict[str, Any]) -> dict[str, Any]:
-        defaults = plugin_defaults(self.name)
+        defaults = plugin_defaults(self.name, self.path)
         unknown = set(params) - set(defaults)
         if unknown:
             raise TypeError(f"{self.name} has no parameter(s) {sorted(unknown)}")
@@ -132,9 +137,11 @@ class Harness:
         spec, prm = parameter_slots(scene, self.model)
         key = repr(spec)
         if key not in self._mods:
-            self._mods[key] = rdsl.jit(SOURCE.format(imports=f"import bsdf.{self.name};"),
-                                       target=self.target,
-                                       variant=self.variant, scene=spec)
+            module = f"bsdf.{self.name}" if self.path is None else self.path.stem
+            paths = [] if self.path is None else [self.path.parent]
+            self._mods[key] = rdsl.jit(SOURCE.format(imports=f"import {module};"),
+                                       target=self.target, variant=self.variant, scene=spec,
+                                       search_paths=paths)
         return self._mods[key], np.asarray(prm if len(prm) else np.zeros(1), f32)
 
     def _call(self, kernel: str, n: int, args: list, ul: Any, params: dict) -> Any:
@@ -201,7 +208,7 @@ class SceneBsdfs:
     def __init__(self, path: str | Path, variant: str, target: str = "host") -> None:
         desc = load_scene_description(path)
         bsdfs, leaves = split_leaves([bsdf_instance(shape.bsdf) for shape in desc.shapes])
-        imports = sorted({BSDF_PLUGINS[i.plugin] for i in [*bsdfs, *leaves]})
+        imports = sorted({stdlib_plugin("bsdf", i.plugin).import_name for i in [*bsdfs, *leaves]})
         self.variant, self.target = variant, target
         self.module = rdsl.jit(SOURCE.format(imports="".join(f"import {m};\n" for m in imports)),
                                target=target, variant=variant,
