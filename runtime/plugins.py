@@ -38,8 +38,10 @@ from ..compiler.sources import is_path
 KINDS = ("bsdf", "texture", "emitter")
 STDLIB = Path(__file__).resolve().parents[1] / "stdlib"
 ENV = "RDSL_PLUGIN_PATH"
-# stdlib plugins the renderer instantiates itself (a tree of combinators is one `mixture`)
-INTERNAL = frozenset({"mixture"})
+# stdlib plugins the renderer instantiates itself, never a scene (a tree of combinators is one
+# `mixture`); written as `{name}_{method}_buffers` functions rather than a `bsdf` block, so
+# found by their file
+INTERNAL = {"mixture": "bsdf/mixture.rdsl"}
 _DECL = re.compile(r"^[ \t]*(bsdf|texture|emitter)[ \t]+([A-Za-z_]\w*)[ \t]*\{", re.MULTILINE)
 # the language's keywords (dsl/parser.py): a file named like one cannot be imported
 _KEYWORDS = frozenset({"import", "struct", "fn", "param", "let", "var", "if", "else", "const",
@@ -149,6 +151,8 @@ def _stdlib_index() -> dict[tuple[str, str], list[PluginDecl]]:
 def stdlib_plugin(kind: str, name: str) -> PluginDecl | None:
     """The stdlib's plugin ``kind name`` (``mixture`` included), or None."""
     decls = _stdlib_index().get((kind, name))
+    if not decls and name in INTERNAL and INTERNAL[name].startswith(f"{kind}/"):
+        return PluginDecl(kind, name, STDLIB / INTERNAL[name], 1, stdlib=True)
     return decls[0] if decls else None
 
 
@@ -357,9 +361,10 @@ def scene_spec(registry: PluginRegistry, category: str, ptype: str) -> Any:
         builtin = str(f) if f.is_file() else f"the built-in {category} `{ptype}`"
     decl = registry.lookup(category, ptype, builtin)
     if decl is not None and not decl.stdlib:
-        if schema is not None and schema.children:
-            raise CompileError(f"`{ptype}` is one of rdsl's built-in {category} combinators; "
-                               "rename this plugin", Loc(str(decl.path), decl.line, 1))
+        if (schema is not None and schema.children) or ptype in INTERNAL:
+            raise CompileError(f"`{ptype}` is the name of one of rdsl's built-in {category} "
+                               "combinators; rename this plugin", Loc(str(decl.path), decl.line,
+                                                                      1))
         return declared_spec(decl)
     if schema is not None:
         return schema

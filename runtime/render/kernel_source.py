@@ -91,7 +91,9 @@ def scene_plugins(desc: Any, bsdfs: list[Instance], emitters: list[Instance],
                         ("emitter", {e.plugin for e in emitters}),
                         ("texture", {t.plugin for t in textures})):
         for name in sorted(names):
-            decl = getattr(desc, "plugins", {}).get(name) or stdlib_plugin(kind, name)
+            decl = getattr(desc, "plugins", {}).get(name)
+            if decl is None or decl.kind != kind:
+                decl = stdlib_plugin(kind, name)
             if decl is None:
                 raise CompileError(f"{kind} `{name}`: no plugin file declares it")
             decls.append(decl)
