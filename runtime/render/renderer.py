@@ -33,8 +33,8 @@ from .bsdfs import (
 )
 from .colors import spectrum_value
 from .declared import declared_instance
-from .emitters import EmitterTables, emitter_tables
 from .emitters import KINDS as EMITTER_KINDS
+from .emitters import EmitterTables, emitter_tables
 from .film import develop, film_uniforms, new_accumulator
 from .integrators import integrator_plan
 from .kernel_source import kernel_source, scene_plugins
