@@ -1,7 +1,8 @@
 """rdsl: a compiler for physically based rendering.
 
 ``rdsl.jit(source_or_path)`` compiles in process, ``rdsl.load(path)`` loads what
-``rdsl compile`` wrote.
+``rdsl compile`` wrote, ``rdsl.load_scene(path)`` loads a Mitsuba scene for rendering and
+``rdsl.register_plugin(path_or_source)`` makes a plugin file available to every scene.
 """
 
 __version__ = "0.1.0"
@@ -18,6 +19,10 @@ def __getattr__(name: str):
         from .runtime.render import renderer
 
         return getattr(renderer, name)
+    if name == "register_plugin":
+        from .runtime import plugins
+
+        return plugins.register_plugin
     if name in ("write_image", "read_exr"):
         from .runtime.render import image
 

@@ -79,12 +79,14 @@ def _guard(name: str, fn: Callable[[], object]) -> None:
                             f"{type(e).__name__}: {e}") from e
 
 
-def frontend(source_or_path: str | Path, filename: str | None = None) -> Module:
-    """Parse, check and lower a program to IR."""
+def frontend(source_or_path: str | Path, filename: str | None = None,
+             search_paths: list[Path] | None = None) -> Module:
+    """Parse, check and lower a program to IR; ``search_paths``: folders its imports are
+    looked up in after the importing file's own (user plugin folders)."""
     from ..dsl import compile_to_ir
 
     try:
-        return compile_to_ir(source_or_path, filename=filename)
+        return compile_to_ir(source_or_path, filename=filename, search_paths=search_paths)
     except CompileError:
         raise
     except RecursionError as e:
@@ -92,13 +94,13 @@ def frontend(source_or_path: str | Path, filename: str | None = None) -> Module:
 
 
 def compile_kernels(source_or_path: str | Path, build: Build, filename: str | None = None,
-                    scene: SceneSpec | None = None, report: list[str] | None = None
-                    ) -> tuple[Module, list[Path]]:
+                    scene: SceneSpec | None = None, report: list[str] | None = None,
+                    search_paths: list[Path] | None = None) -> tuple[Module, list[Path]]:
     """Compile to post-vectorize IR for ``build``.  Returns the module and the source
     files it was built from (for cache keys).  ``scene`` specializes the scene
     placeholders (see :mod:`rdsl.compiler.passes.specialize`); ``report`` collects what
-    specialization did."""
-    module = frontend(source_or_path, filename)
+    specialization did; ``search_paths`` are the frontend's (see :func:`frontend`)."""
+    module = frontend(source_or_path, filename, search_paths)
     run_passes(module, pipeline(build, scene, report))
     module.attrs["target"] = build.target.name
-    return module, source_files(source_or_path, filename)
+    return module, source_files(source_or_path, search_paths or (), filename)

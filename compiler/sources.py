@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import os
 import re
+from collections.abc import Iterable
 from pathlib import Path
 
 from .diagnostics import CompileError
@@ -45,12 +46,17 @@ def read_source(source_or_path: str | os.PathLike) -> tuple[str, Path | None]:
         raise CompileError(f"cannot read `{path}`: {why}") from None
 
 
-def source_files(source_or_path: str | Path, filename: str | None = None) -> list[Path]:
+def source_files(source_or_path: str | Path, search_paths: Iterable[str | Path] = (),
+                 filename: str | None = None) -> list[Path]:
     """The main file (if any), everything it imports, and the prelude, resolved the way the
-    frontend resolves imports.  Used to key the kernel cache.  Source text that the frontend
-    compiles under a ``filename`` imports from that file's folder, as the frontend does."""
+    frontend resolves imports (``dsl/imports.py``: next to the importing file, then in
+    ``search_paths`` unless the importer is a stdlib file, then in the stdlib).  Source text
+    imports relative to ``filename``'s folder when one is given.  Used to key the kernel
+    cache, so a user plugin's file is part of the key of every kernel importing it."""
     files: list[Path] = []
     seen: set[Path] = set()
+    paths = [Path(p) for p in search_paths]
+    stdlib = STDLIB.resolve()
 
     def visit(path: Path) -> None:
         path = path.resolve()
@@ -58,12 +64,12 @@ def source_files(source_or_path: str | Path, filename: str | None = None) -> lis
             return
         seen.add(path)
         files.append(path)
-        scan(path.read_text(errors="replace"), path.parent)
+        scan(path.read_text(errors="replace"), path.parent, path.is_relative_to(stdlib))
 
-    def scan(text: str, folder: Path) -> None:
+    def scan(text: str, folder: Path, from_stdlib: bool = False) -> None:
         for m in re.finditer(r"^\s*import\s+([A-Za-z_][\w.]*)\s*;", text, re.MULTILINE):
             rel = Path(*m.group(1).split(".")).with_suffix(".rdsl")
-            for base in (folder, STDLIB):
+            for base in (folder, *([] if from_stdlib else paths), STDLIB):
                 if (base / rel).is_file():
                     visit(base / rel)
                     break

@@ -1,7 +1,9 @@
 """Module loading: the implicit prelude, the main file and, depth first, its imports.
 
 An ``import a.b;`` is looked up as ``a/b.rdsl`` next to the importing file, then in the
-search paths, then in the stdlib.  Each file is parsed once; a cycle is an error.
+search paths, then in the stdlib.  A stdlib file's imports skip the search paths: a user's
+plugin folder (``rdsl render --plugins``) holding a ``warp.rdsl`` must not replace the
+stdlib's for the stdlib's own plugins.  Each file is parsed once; a cycle is an error.
 """
 
 from __future__ import annotations
@@ -53,7 +55,9 @@ class Loader:
         dirs: list[Path] = []
         if not importer.startswith("<"):
             dirs.append(Path(importer).parent)
-        dirs += self.search_paths + [STDLIB]
+        if not in_stdlib(importer):
+            dirs += self.search_paths
+        dirs.append(STDLIB)
         for d in dirs:
             cand = d / rel
             if cand.is_file():
@@ -66,8 +70,17 @@ class Loader:
                     self.load_path(cand)
                 return
         name = ".".join(imp.path)
-        raise err(f"cannot find module `{name}` (looked for `{rel.as_posix()}` next to "
-                  f"the importing file and in the stdlib)", imp.loc)
+        where = "next to the importing file" + (", in the search paths"
+                                                 if self.search_paths else "")
+        raise err(f"cannot find module `{name}` (looked for `{rel.as_posix()}` {where} and "
+                  "in the stdlib)", imp.loc)
+
+
+def in_stdlib(filename: str) -> bool:
+    """Whether ``filename`` is a file of the stdlib (its imports never see search paths)."""
+    if filename.startswith("<"):
+        return False
+    return Path(filename).resolve().is_relative_to(STDLIB.resolve())
 
 
 def prelude() -> list[Path]:

@@ -190,17 +190,20 @@ def jit(source_or_path: str | os.PathLike, target: str | Target = "host",
     diagnostic before any source is read.  The library is cached under
     :func:`rdsl.runtime.cache.cache_dir`; a second call with the same sources (imports
     included), target, variant and options loads it without compiling.  ``options`` are
-    passed on to ``rdsl.compiler.driver.compile_kernels``."""
+    passed on to ``rdsl.compiler.driver.compile_kernels`` (``search_paths``: folders imports
+    are looked up in, such as a scene's user plugin folders)."""
     from ..compiler.build import Build
     from ..compiler.sources import source_files
 
     t0 = time.perf_counter()
     build = build or Build.of(target, variant)
     text = _source_text(source_or_path)
-    files = [Path(f) for f in source_files(source_or_path, options.get("filename"))]
+    files = [Path(f) for f in source_files(source_or_path, options.get("search_paths") or (),
+                                           options.get("filename"))]
     # the file name only labels diagnostics, and a cached build had none: scenes copied to
-    # another directory share their kernels
-    keyed = {k: v for k, v in options.items() if k != "filename"}
+    # another directory share their kernels; the search paths count through the files they
+    # resolved (their paths and texts are keyed)
+    keyed = {k: v for k, v in options.items() if k not in ("filename", "search_paths")}
     key = cache_key(text, files, build, keyed)
     root = cache_dir()
     entry = root / key

@@ -18,7 +18,8 @@ import rdsl
 from rdsl.core import spectral as S
 from rdsl.core.color import VARIANTS  # noqa: F401 (for the tests)
 from rdsl.core.scene_spec import SceneSpec, SpectrumValue
-from rdsl.runtime.render.bsdfs import BSDF_PLUGINS, bsdf_instance, split_leaves
+from rdsl.runtime.plugins import stdlib_plugin
+from rdsl.runtime.render.bsdfs import bsdf_instance, split_leaves
 from rdsl.runtime.scene.loader import load_scene_description
 from rdsl.runtime.testkit.harness import SOURCE, Declaration, Harness
 
@@ -35,7 +36,7 @@ class SceneBsdfs:
     def __init__(self, path: str | Path, variant: str, target: str = "host") -> None:
         desc = load_scene_description(path)
         bsdfs, leaves = split_leaves([bsdf_instance(shape.bsdf) for shape in desc.shapes])
-        imports = sorted({BSDF_PLUGINS[i.plugin] for i in [*bsdfs, *leaves]})
+        imports = sorted({stdlib_plugin("bsdf", i.plugin).import_name for i in [*bsdfs, *leaves]})
         self.variant, self.target = variant, target
         self.module = rdsl.jit(SOURCE.format(imports="".join(f"import {m};\n" for m in imports)),
                                target=target, variant=variant,

@@ -11,6 +11,10 @@ one-value lookup, Mitsuba's ``eval_1``; the scene schema says which parameters m
 textures).  A parameter the rdsl plugin does not have is an error unless it
 holds Mitsuba's default, so nothing is dropped silently.
 
+A user plugin (one with a declaration, runtime/plugins.py) takes the scene's values as its
+``param``s say, without these conversions (runtime/render/declared.py); it nests in the
+combinators like any BSDF.
+
 A tree of combinators, nested to any depth, is one instance of the rdsl plugin ``mixture``
 (``stdlib/bsdf/mixture.rdsl``): the tree is flattened into at most four terms, each a
 nested BSDF with its coefficient seen from above and from below (products of the blend
@@ -29,23 +33,16 @@ import re
 from collections.abc import Iterator
 from dataclasses import dataclass
 from functools import cache
-from pathlib import Path
 from typing import Any
 
 from ...compiler.diagnostics import CompileError
 from ...core.color import ColorModel
 from ...core.scene_spec import Instance
+from ..plugins import INTERNAL, stdlib_names, stdlib_plugin
 from ..scene.schema import spec_for
 from .colors import spectrum_value
+from .declared import declared_instance
 
-STDLIB = Path(__file__).resolve().parents[2] / "stdlib"
-# Mitsuba plugin -> rdsl file under stdlib/
-BSDF_PLUGINS = {"diffuse": "bsdf.diffuse", "roughconductor": "bsdf.roughconductor",
-                "conductor": "bsdf.conductor", "dielectric": "bsdf.dielectric",
-                "thindielectric": "bsdf.thindielectric", "plastic": "bsdf.plastic",
-                "roughplastic": "bsdf.roughplastic", "roughdielectric": "bsdf.roughdielectric",
-                "mixture": "bsdf.mixture", "polarizer": "bsdf.polarizer",
-                "retarder": "bsdf.retarder"}
 COMBINATORS = ("twosided", "blendbsdf", "mask")  # Mitsuba's, all rdsl's `mixture`
 LEAF_PARAMS = ("a", "b", "c", "d")  # the mixture's parameters that hold leaf ids
 MAX_TERMS = len(LEAF_PARAMS)  # nested BSDFs one combinator tree may hold
@@ -76,7 +73,7 @@ def polarization_warnings(desc: Any, model: ColorModel) -> list[str]:
         return []
     out = []
     for plugin in _scene_bsdfs(desc):
-        if plugin.type in UNPOLARIZED_BEHAVIOUR:
+        if plugin.type in UNPOLARIZED_BEHAVIOUR and getattr(plugin, "decl", None) is None:
             out.append(f"{plugin.loc or desc.path}: warning: {_where(plugin)} has no effect on "
                        f"polarization in the unpolarized `{model.name}` variant; it acts as "
                        f"{UNPOLARIZED_BEHAVIOUR[plugin.type]} (as in Mitsuba 3). Render with "
@@ -90,7 +87,8 @@ def dispersion_warnings(desc: Any, model: ColorModel) -> list[str]:
         return []
     out = []
     for plugin in _scene_bsdfs(desc):
-        if plugin.params.get("int_cauchy_b") or plugin.params.get("ext_cauchy_b"):
+        if getattr(plugin, "decl", None) is None and (plugin.params.get("int_cauchy_b")
+                                    or plugin.params.get("ext_cauchy_b")):
             out.append(f"{plugin.loc or desc.path}: warning: {_where(plugin)} is dispersive "
                        f"(Cauchy B term), which only spectral variants render; the `{model.name}` "
                        "variant uses its IOR at 589.3 nm (the sodium D line) for every colour.")
@@ -99,8 +97,11 @@ def dispersion_warnings(desc: Any, model: ColorModel) -> list[str]:
 
 @cache
 def plugin_params(plugin: str) -> dict[str, str]:
-    """The rdsl plugin's ``param`` names and types, read from its source."""
-    src = (STDLIB / (BSDF_PLUGINS[plugin].replace(".", "/") + ".rdsl")).read_text()
+    """The stdlib plugin's ``param`` names and types, read from its source (cheaply: the
+    stdlib is not parsed before the kernel is compiled)."""
+    decl = stdlib_plugin("bsdf", plugin)
+    assert decl is not None, plugin
+    src = decl.path.read_text()
     return dict(re.findall(r"^\s*param\s+(\w+)\s*:\s*(\w+)", src, re.MULTILINE))
 
 
@@ -139,8 +140,10 @@ def _is_default(plugin: Any, name: str, value: Any) -> bool:
 
 def leaf_instance(plugin: Any, textures: Any = None) -> Instance:
     """One non-combinator BSDF."""
-    if plugin.type not in BSDF_PLUGINS or plugin.type == "mixture":
-        supported = ", ".join(sorted([*BSDF_PLUGINS, *COMBINATORS]))
+    if getattr(plugin, "decl", None) is not None:
+        return declared_instance(plugin, textures)
+    if stdlib_plugin("bsdf", plugin.type) is None or plugin.type in INTERNAL:
+        supported = ", ".join(sorted([*stdlib_names("bsdf"), *COMBINATORS]))
         raise CompileError(f"bsdf `{plugin.type}` is not supported by the renderer yet "
                            f"(supported: {supported})", plugin.loc)
     ours = plugin_params(plugin.type)

@@ -42,6 +42,10 @@ def add_commands(sub: argparse._SubParsersAction) -> dict[str, Callable[[Any], i
                         "every emitter kind (default: specialized, generic with --watch)")
     r.add_argument("--triangulate", action="store_true",
                    help="render spheres and disks as triangle meshes, not analytic shapes")
+    r.add_argument("--plugins", action="append", default=[], metavar="DIR",
+                   help="a folder (or .rdsl file) of BSDF, texture and emitter plugins, "
+                        "searched after the scene's folder (repeatable; also "
+                        "$RDSL_PLUGIN_PATH)")
     r.add_argument("--quiet", action="store_true", help="no progress bar")
     r.add_argument("--watch", action="store_true",
                    help="after the image, render again whenever the scene, a file it reads "
@@ -72,7 +76,8 @@ def render_command(args: Any) -> int:
 
     t0 = time.perf_counter()
     scene = load_scene(scene_path, build=build, specialize=specialize,
-                       triangulate=getattr(args, "triangulate", False), **defines)
+                       triangulate=getattr(args, "triangulate", False),
+                       plugins=getattr(args, "plugins", []), **defines)
     t_load = time.perf_counter() - t0
     if not scene.buffers.nlight:
         print(f"{scene_path}: warning: the scene has no emitters; the image will be black",

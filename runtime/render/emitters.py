@@ -18,9 +18,8 @@ from ...compiler.diagnostics import CompileError
 from ...core.color import RGB, ColorModel
 from .colors import emission_row, emission_texels
 
-# Mitsuba plugin -> rdsl file under stdlib/, for the emitters that are scene instances (the
-# area lights of shapes); the others are rows of the emitter tables
-EMITTER_PLUGINS = {"area": "emitter.area"}
+# the emitter table's kinds (lights.rdsl); an area light (stdlib `area` or a user's emitter
+# plugin, runtime/plugins.py) is also a scene instance, whose `eval` the integrator calls
 KINDS = {"area": 0, "point": 1, "spot": 2, "directional": 3, "constant": 4, "envmap": 5}
 ENVIRONMENTS = ("constant", "envmap")
 STRIDE = 24  # floats per emitter in E (lights.rdsl: emitter_stride())
@@ -97,7 +96,7 @@ def emitter_tables(desc: Any, lights: list[tuple[int, int, float]],
     assert len(EK) == area_emitters, (len(EK), area_emitters)
     env, ENV = -1, np.zeros(1, np.float32)
     for em in desc.emitters:
-        if em.type == "area":
+        if em.type == "area" or getattr(em, "decl", None) is not None:
             continue
         what = f"emitter `{em.type}`" + (f" ({em.id})" if em.id else "")
         if em.type not in KINDS:

@@ -7,6 +7,11 @@ plugins the scene uses, the integrator call, the AOV fields and one film weight 
 sample reaches (so the film's filter is evaluated once per sample and axis).  The output is
 a pure function of those inputs; tests/test_kernel_source.py compares it with the golden
 texts under tests/golden/kernel_source/.
+
+The plugins' files are the ones the scene's plugin registry found (runtime/plugins.py): the
+kernel imports a stdlib plugin by its path (``import bsdf.diffuse;``) and a user plugin by its
+file's name (``import velvet;`` for ``velvet.rdsl``), whose folder :func:`scene_plugins`
+returns among the search paths to compile the kernel with.
 """
 
 from __future__ import annotations
@@ -18,19 +23,18 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from ...compiler.diagnostics import CompileError
 from ...core.color import RGB, ColorModel
-from .bsdfs import BSDF_PLUGINS
+from ..plugins import PluginDecl, kernel_imports, stdlib_plugin
 from .camera import camera_uniforms
-from .emitters import EMITTER_PLUGINS
 from .film import film_reach, film_uniforms
 from .integrators import IntegratorPlan, direct_samples, integrator_plan
-from .textures import TEXTURE_PLUGINS
 
 if TYPE_CHECKING:
     from ...core.scene_spec import Instance
     from .renderer import SceneBuffers
 
-__all__ = ["AOV_EXPRESSIONS", "kernel_source", "literal"]
+__all__ = ["AOV_EXPRESSIONS", "kernel_source", "literal", "scene_plugins"]
 
 TEMPLATE = Path(__file__).resolve().parents[2] / "stdlib" / "render" / "kernel.rdsl.in"
 # AOV type -> rdsl expression of each channel, from the `Aov` struct `aov`
@@ -78,9 +82,27 @@ def fill(holes: dict[str, str]) -> str:
     return "\n".join(out)
 
 
-def _imports(plan: IntegratorPlan, bufs: SceneBuffers, bsdfs: list[Instance],
-             emitters: list[Instance], spectral: bool) -> list[str]:
-    """The modules the kernel needs beyond path tracing, the camera and the film."""
+def scene_plugins(desc: Any, bsdfs: list[Instance], emitters: list[Instance],
+                  textures: list[Instance]) -> tuple[list[str], list[Path]]:
+    """The import names of the plugins of the scene's instances, and the search paths that
+    find the user plugins among them (for ``jit``)."""
+    decls: list[PluginDecl] = []
+    for kind, names in (("bsdf", {x.plugin for b in bsdfs for x in [b, *b.children]}),
+                        ("emitter", {e.plugin for e in emitters}),
+                        ("texture", {t.plugin for t in textures})):
+        for name in sorted(names):
+            decl = getattr(desc, "plugins", {}).get(name)
+            if decl is None or decl.kind != kind:
+                decl = stdlib_plugin(kind, name)
+            if decl is None:
+                raise CompileError(f"{kind} `{name}`: no plugin file declares it")
+            decls.append(decl)
+    return kernel_imports(decls, Path(desc.path).resolve().parent)
+
+
+def _imports(plan: IntegratorPlan, spectral: bool, plugins: list[str]) -> list[str]:
+    """The modules the kernel needs beyond path tracing, the camera and the film (and the
+    scene's ``plugins``)."""
     modules = ["spectral"] if spectral else []
     if plan.radiance is not None and plan.radiance.type == "direct":
         modules.append("render.direct")
@@ -88,9 +110,7 @@ def _imports(plan: IntegratorPlan, bufs: SceneBuffers, bsdfs: list[Instance],
         modules.append("render.aov")
     if plan.stokes is not None:
         modules.append("render.stokes")
-    modules += sorted({BSDF_PLUGINS[x.plugin] for b in bsdfs for x in [b, *b.children]}
-                      | {EMITTER_PLUGINS[e.plugin] for e in emitters}
-                      | {TEXTURE_PLUGINS[t.plugin] for t in bufs.textures})
+    modules += sorted(plugins)
     return [f"import {m};" for m in modules]
 
 
@@ -169,6 +189,7 @@ def kernel_source(desc: Any, bufs: SceneBuffers, bsdfs: list[Instance],
     mono_pol = model.mono and model.polarized
     plan = integrator_plan(desc.integrator)
     plan.check_variant(model)
+    plugins, _ = scene_plugins(desc, bsdfs, emitters, bufs.textures)
     aov_fields = _aov_fields(plan, channels, spectral)
     film = film_uniforms(desc.sensor.film, 1, channels=channels + len(plan.aov_channel_names()))
     seed_rng = (["    let (rng, u_wavelength) = next_1d(pcg32_seed(UInt64(seed), stream));",
@@ -176,7 +197,7 @@ def kernel_source(desc: Any, bufs: SceneBuffers, bsdfs: list[Instance],
                 else ["    let rng = pcg32_seed(UInt64(seed), stream);"])
     return fill({
         "scene_name": Path(desc.path).name,
-        "imports": "\n".join(_imports(plan, bufs, bsdfs, emitters, spectral)),
+        "imports": "\n".join(_imports(plan, spectral, plugins)),
         "value_type": "Vec3" if spectral else "Unpolarized" if mono_pol else "Spectrum",
         "value": ("to_srgb(L * wavelength_weight)" if spectral else "unpolarized(L)"
                   if mono_pol else "L"),

@@ -35,11 +35,12 @@ from .bsdfs import (
     split_leaves,
 )
 from .colors import spectrum_value
-from .emitters import EMITTER_PLUGINS, EmitterTables, emitter_tables
+from .declared import declared_instance
 from .emitters import KINDS as EMITTER_KINDS
+from .emitters import EmitterTables, emitter_tables
 from .film import develop, film_uniforms, new_accumulator
 from .integrators import integrator_plan
-from .kernel_source import kernel_source
+from .kernel_source import kernel_source, scene_plugins
 from .progress import Progress
 from .shapes import FLAGS as SHAPE_FLAGS
 from .shapes import KINDS as SHAPE_KINDS
@@ -186,8 +187,11 @@ def _shape_kind(flags: int) -> int:
 
 
 def _area_instance(em: Any, textures: TextureTable) -> Instance:
-    """The ``area`` emitter instance of an emissive shape; its radiance may be a texture."""
-    if em.type not in EMITTER_PLUGINS:
+    """The ``area`` emitter instance of an emissive shape (its radiance may be a texture),
+    or the instance of a user's emitter plugin."""
+    if getattr(em, "decl", None) is not None:
+        return declared_instance(em, textures, illuminant=True)
+    if em.type != "area":
         raise CompileError(f"emitter `{em.type}` is not supported by the renderer yet", em.loc)
     radiance = em.params["radiance"]
     if getattr(radiance, "category", None) == "texture":
@@ -202,11 +206,12 @@ class Scene:
     returns the image as a float32 (H, W, C) array."""
 
     def __init__(self, path: str | Path, build: Build, specialize: bool = True,
-                 triangulate: bool = False, **defaults: Any) -> None:
+                 triangulate: bool = False, plugins: Any = (), **defaults: Any) -> None:
         self.path = Path(path)
         self.build = build
         self.specialize = specialize
         self.triangulate = triangulate
+        self.plugins = plugins
         self.defaults = defaults
         self._read(None)
 
@@ -218,6 +223,7 @@ class Scene:
         new = Scene.__new__(Scene)
         new.path, new.build, new.specialize = self.path, self.build, self.specialize
         new.triangulate, new.defaults = self.triangulate, self.defaults
+        new.plugins = self.plugins
         new._read(self)
         return new
 
@@ -231,7 +237,8 @@ class Scene:
         # self.reads: every file the load read (rdsl render --watch watches them), even
         # when it fails part way
         with recording(previous.reads if previous is not None else None) as self.reads:
-            self.desc = load_scene_description(self.path, **self.defaults)
+            self.desc = load_scene_description(self.path, plugins=self.plugins,
+                                               **self.defaults)
             self.spp = int(self.desc.sensor.sampler.params.get("sample_count", 4))
             self.seed = int(self.desc.sensor.sampler.params.get("seed", 0))
             integrator_plan(self.desc.integrator).check_variant(model)
@@ -274,9 +281,12 @@ class Scene:
         # the report is derived from the scene, so a cache hit can print it too
         self.report = describe(scene) + self._folding(scene)
         self.kernel_src, self.scene_spec = src, scene
+        # the folders of the user plugins the kernel imports
+        _, self.search_paths = scene_plugins(self.desc, self.bsdfs, self.emitters,
+                                             self.buffers.textures)
         if not self.specialize:  # generic: parameter values come from PRM at run time
             scene, self.params = parameter_slots(scene, self.build.model)
-        mod = jit(src, build=self.build, scene=scene,
+        mod = jit(src, build=self.build, scene=scene, search_paths=self.search_paths,
                   filename=str(self.path.with_suffix(".rdsl")))
         self._module = mod
         self.compile_seconds = mod.compile_seconds
@@ -319,7 +329,8 @@ class Scene:
         counts = []
         for scene in (self.scene_spec, parameter_slots(self.scene_spec, self.build.model)[0]):
             module, _ = compile_kernels(self.kernel_src, self.build, scene=scene,
-                                        filename=str(self.path.with_suffix(".rdsl")))
+                                        filename=str(self.path.with_suffix(".rdsl")),
+                                        search_paths=self.search_paths)
             counts.append(sum(1 for _ in module.functions["render_sample"].walk()))
         return counts[0], counts[1]
 
@@ -404,10 +415,13 @@ def _film_samples(out: dict[str, Any], ns: int) -> np.ndarray:
 def load_scene(path: str | Path, variant: str | ColorModel = "rgb",
                target: str | Target = "host", specialize: bool = True,
                triangulate: bool = False, *, build: Build | None = None,
-               **defaults: Any) -> Scene:
+               plugins: Any = (), **defaults: Any) -> Scene:
     """Load a Mitsuba 3 XML scene for rendering (``-D name=value`` as keyword args).
     ``specialize=False`` gives the generic build (parameters read at run time).  ``build``,
     when given, replaces ``variant`` and ``target``; a bad name of either is a diagnostic
-    before the scene is read."""
+    before the scene is read.  ``plugins``: folders (or ``.rdsl`` files) searched for the
+    scene's BSDF, texture and emitter plugins after the scene's own folder and before
+    ``$RDSL_PLUGIN_PATH``, the registered plugins and the stdlib (docs/plugins.md)."""
     build = build or Build.of(target, variant)
-    return Scene(path, build, specialize=specialize, triangulate=triangulate, **defaults)
+    return Scene(path, build, specialize=specialize, triangulate=triangulate,
+                 plugins=plugins, **defaults)

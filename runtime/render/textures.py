@@ -2,7 +2,8 @@
 buffer.
 
 A texture that sets a BSDF parameter becomes a :class:`TextureRef` in that BSDF's instance;
-the texture itself is an :class:`Instance` of the stdlib plugin (``stdlib/texture/``).  The
+the texture itself is an :class:`Instance` of the stdlib plugin (``stdlib/texture/``) or of
+a user's texture plugin (its params as declared: runtime/render/declared.py).  The
 texels of every bitmap are concatenated into ``T`` (3 float32 per texel, rows top to bottom),
 each bitmap's offset, width and height being constants of its instance.  A texture that
 sets a colour stores them as the variant stores colours (runtime/render/colors.py); one that
@@ -25,11 +26,11 @@ import numpy as np
 from ...compiler.diagnostics import CompileError
 from ...core.color import RGB, ColorModel
 from ...core.scene_spec import Instance, SpectrumValue, TextureRef
+from ..plugins import stdlib_names
 from ..scene.reads import memoized
 from .colors import encode_texels, spectrum_value
+from .declared import declared_instance, needs_eval_1
 
-# Mitsuba plugin -> rdsl file under stdlib/
-TEXTURE_PLUGINS = {"bitmap": "texture.bitmap", "checkerboard": "texture.checkerboard"}
 # numbering of stdlib/texture/bitmap.rdsl (filter_bilinear() ... wrap_clamp())
 BITMAP_FILTERS = {"bilinear": 0, "nearest": 1}
 BITMAP_WRAPS = {"repeat": 0, "mirror": 1, "clamp": 2}
@@ -109,6 +110,8 @@ class TextureTable:
         (one of :data:`USAGES`): each usage is an instance of its own, with its own texels."""
         assert usage in USAGES, usage
         key = (id(plugin), usage)
+        if usage == "scalar":
+            needs_eval_1(plugin, what)
         if key not in self._ids:
             self._ids[key] = (plugin, len(self.instances))
             self.instances.append(self._instance(plugin, what, usage))
@@ -126,12 +129,14 @@ class TextureTable:
     def _instance(self, plugin: Any, what: str, usage: str) -> Instance:
         p = plugin.params
         name = plugin.id or plugin.type
-        if plugin.type not in TEXTURE_PLUGINS:
+        emitted = usage == "emitted"
+        if getattr(plugin, "decl", None) is not None:  # textures of textures: not supported
+            return declared_instance(plugin, None, illuminant=emitted)
+        if plugin.type not in ("bitmap", "checkerboard"):
             raise CompileError(f"{what}: texture `{plugin.type}` is not supported by the "
-                               f"renderer yet (supported: {', '.join(TEXTURE_PLUGINS)})",
+                               f"renderer yet (supported: {', '.join(stdlib_names('texture'))})",
                                plugin.loc)
         params: dict[str, Any] = _uv_rows(p["to_uv"])
-        emitted = usage == "emitted"
         if plugin.type == "checkerboard":
             for c in ("color0", "color1"):
                 rgb = getattr(p[c], "rgb", None)

@@ -7,6 +7,10 @@ defaults, and derived values are resolved here (conductor ``material`` to ``eta`
 ``alpha`` to ``alpha_u``/``alpha_v``, the camera's field of view to ``fov_x``, the film's
 crop window).  Shapes carry their triangle mesh in world space.  Nothing is half-loaded: the
 first error stops the load.
+
+A ``bsdf``, ``texture`` or ``emitter`` type is resolved through the scene's plugin registry
+(runtime/plugins.py): a user plugin is checked against its own ``param`` declarations
+(:func:`rdsl.runtime.plugins.declared_spec`), and its errors name the declaration too.
 """
 
 from __future__ import annotations
@@ -20,6 +24,8 @@ from typing import Any
 import numpy as np
 
 from ...compiler.ir import Loc
+from ..plugins import KINDS as PLUGIN_KINDS
+from ..plugins import PluginDecl, PluginRegistry, scene_spec, stdlib_names
 from . import meshes
 from . import transform as xf
 from .analytic import Analytic
@@ -35,7 +41,6 @@ from .schema import (
     Param,
     PluginSpec,
     plugin_types,
-    spec_for,
 )
 from .spectra import Color, conductor_ior, lookup_ior
 from .xml import Child, ObjectNode, Prop, SceneTree, read_scene
@@ -46,7 +51,10 @@ MAX_CAUCHY_B = 1.0
 _KIND_NAMES = {"float": "a float", "integer": "an integer", "boolean": "a boolean",
                "string": "a string", "point": "a point", "vector": "a vector",
                "transform": "a transform", "color": "a color (float, rgb, spectrum or texture)",
-               "ftex": "a float or a texture", "ior": "a float or a named IOR string"}
+               "ftex": "a float or a texture", "ior": "a float or a named IOR string",
+               "spectrum": "a color (float, rgb or spectrum)",
+               "vec3": "a vector, point or rgb", "unset": "nothing (it is not settable "
+               "from a scene; give it a default in the plugin)"}
 
 
 @dataclass
@@ -59,6 +67,8 @@ class Plugin:
     id: str | None = None
     loc: Loc | None = None
     children: list[Plugin] = field(default_factory=list)  # nested BSDFs / integrators
+    # a plugin whose params are its declaration's (a user plugin), not Mitsuba's schema
+    decl: PluginDecl | None = None
 
     def __getitem__(self, name: str) -> Any:
         return self.params[name]
@@ -94,24 +104,31 @@ class SceneDescription:
     emitters: list[Plugin]          # area emitters (also on their shape) and the others
     ids: dict[str, Plugin]
     params: dict[str, str]          # the $parameters after <default> and -D
+    # name -> declaration of the plugins the scene resolved (the kernel imports their files)
+    plugins: dict[str, PluginDecl] = field(default_factory=dict)
 
     @property
     def sensor(self) -> Sensor:
         return self.sensors[0]
 
 
-def load_scene_description(path: str | Path, **defaults: Any) -> SceneDescription:
-    """Load a Mitsuba 3 scene; ``defaults`` override ``<default>`` values (``-D name=value``)."""
+def load_scene_description(path: str | Path, *, plugins: Any = (),
+                           **defaults: Any) -> SceneDescription:
+    """Load a Mitsuba 3 scene; ``defaults`` override ``<default>`` values (``-D name=value``);
+    ``plugins``: folders or files searched for plugins after the scene's folder."""
     tree = read_scene(path, {k: str(v) for k, v in defaults.items()})
     if tree.unused_defines:
         warnings.warn(f"{tree.path}: parameters never used by the scene: "
                       f"{', '.join(tree.unused_defines)}", stacklevel=2)
-    return _Builder(tree).build()
+    return _Builder(tree, PluginRegistry.for_scene(tree.path, plugins)).build()
 
 
 class _Builder:
-    def __init__(self, tree: SceneTree) -> None:
+    def __init__(self, tree: SceneTree, registry: PluginRegistry) -> None:
         self.tree = tree
+        self.registry = registry
+        self.specs: dict[tuple[str, str], PluginSpec | None] = {}
+        self.plugins: dict[str, PluginDecl] = {}
         # keyed by id(); the node is kept so that a freed temporary's id is never reused
         self.done: dict[int, tuple[ObjectNode, Plugin]] = {}
         self.ids: dict[str, Plugin] = {}
@@ -136,9 +153,9 @@ class _Builder:
                 if obj.emitter is not None:
                     emitters.append(obj.emitter)
             elif cat == "emitter":
-                if obj.type == "area":
-                    raise scene_error("an 'area' emitter must be nested inside a <shape>",
-                                      ch.loc)
+                if obj.type == "area" or obj.decl is not None:
+                    raise scene_error(f"an '{obj.type}' emitter must be nested inside a "
+                                      "<shape> (plugin emitters are area lights)", ch.loc)
                 emitters.append(obj)
         if len(integrators) > 1:
             raise scene_error("the scene declares more than one <integrator>",
@@ -147,7 +164,7 @@ class _Builder:
         if not sensors:
             sensors.append(self.default_sensor(shapes))
         return SceneDescription(self.tree.path, integrator, sensors, shapes, emitters,
-                                self.ids, dict(self.tree.params))
+                                self.ids, dict(self.tree.params), self.plugins)
 
     def default(self, category: str, ptype: str, **params: Any) -> Plugin:
         node = ObjectNode(category, ptype, None, Loc(str(self.tree.path), 0, 0),
@@ -175,13 +192,10 @@ class _Builder:
         key = id(node)
         if key in self.done:
             return self.done[key][1]
-        spec = spec_for(node.category, node.type)
-        if spec is None:
-            raise scene_error(f"unknown {node.category} plugin '{node.type}'; accepted: "
-                              f"{', '.join(plugin_types(node.category))}", node.loc)
+        spec = self.spec(node)
         params, objects = self.collect(node, spec)
         cls = {"shape": Shape, "sensor": Sensor}.get(node.category, Plugin)
-        obj = cls(node.category, node.type, params, node.id, node.loc)
+        obj = cls(node.category, node.type, params, node.id, node.loc, decl=spec.decl)
         for cat, items in objects.items():
             lo, hi = spec.children[cat]
             if not lo <= len(items) <= hi:
@@ -194,9 +208,32 @@ class _Builder:
             self.ids[node.id] = obj
         return obj
 
-    @staticmethod
-    def what(node: ObjectNode) -> str:
-        return f"{node.category} '{node.type}'"
+    def spec(self, node: ObjectNode) -> PluginSpec:
+        """The schema of the node's plugin, resolved once per scene (user plugins first)."""
+        key = (node.category, node.type)
+        if key not in self.specs:
+            self.specs[key] = scene_spec(self.registry, *key)
+        spec = self.specs[key]
+        if spec is None:
+            names = dict.fromkeys([*plugin_types(node.category), *stdlib_names(node.category),
+                                   *self.registry.user_names(node.category)])
+            hint = (f" (no .rdsl file next to the scene or in the plugin folders declares "
+                    f"`{node.category} {node.type}`)" if node.category in PLUGIN_KINDS else "")
+            raise scene_error(f"unknown {node.category} plugin '{node.type}'; accepted: "
+                              f"{', '.join(names)}{hint}", node.loc)
+        decl = spec.decl
+        if decl is not None:
+            other = self.plugins.setdefault(decl.name, decl)
+            if other is not decl:
+                raise scene_error(f"two plugins named `{decl.name}` in one scene "
+                                  f"({other.where}, {decl.where}); rename one", node.loc)
+        return spec
+
+    def what(self, node: ObjectNode) -> str:
+        spec = self.specs.get((node.category, node.type))
+        decl = spec.decl if spec is not None else None
+        where = f" (declared at {decl.where})" if decl is not None else ""
+        return f"{node.category} '{node.type}'{where}"
 
     def collect(self, node: ObjectNode, spec: PluginSpec
                 ) -> tuple[dict[str, Any], dict[str, list[tuple[Plugin, Child]]]]:
@@ -207,6 +244,10 @@ class _Builder:
             if name not in spec.params:
                 raise scene_error(f"unknown parameter '{name}' of {self.what(node)}; "
                                   f"accepted: {accepted}", prop.loc)
+            if spec.decl is not None and prop.kind == "string":  # rdsl has no strings
+                raise scene_error(f"parameter '{name}' of {self.what(node)} is a string, which "
+                                  f"no rdsl param takes{_declared(name, spec.params[name])}",
+                                  prop.loc)
             params[name] = self.convert(node, name, spec.params[name], prop.kind, prop.value,
                                         prop.loc)
         for ch in node.children:
@@ -233,7 +274,8 @@ class _Builder:
                 continue
             if p.default is REQUIRED:
                 raise scene_error(f"{self.what(node)} is missing the required parameter "
-                                  f"'{name}' ({_KIND_NAMES[p.kind]})", node.loc)
+                                  f"'{name}' ({_KIND_NAMES[p.kind]}){_declared(name, p)}",
+                                  node.loc)
             if p.default is not None:
                 params[name] = self.convert(node, name, p, _prop_kind(p.default), p.default,
                                             node.loc)
@@ -248,14 +290,16 @@ class _Builder:
             if kind == "texture" and not isinstance(value, ObjectNode):
                 got = "a texture"
             raise scene_error(f"parameter '{name}' of {self.what(node)} expects "
-                              f"{_KIND_NAMES[p.kind]}, got {got}", loc)
+                              f"{_KIND_NAMES[p.kind]}, got {got}{_declared(name, p)}", loc)
         if kind == "texture":
             return self.instantiate(value)
         if p.kind == "float":
             return float(value)
-        if p.kind in ("color", "ftex"):
+        if p.kind == "vec3":
+            return np.asarray(value.rgb if kind == "rgb" else value, dtype=np.float64)
+        if p.kind in ("color", "ftex", "spectrum"):
             if kind in ("float", "integer"):
-                return Color.gray(value) if p.kind == "color" else float(value)
+                return Color.gray(value) if p.kind != "ftex" else float(value)
             if node.category != "emitter" and value.wavelengths is not None:
                 # a reflectance spectrum is clamped to [0, 1] (Mitsuba's bounded conversion)
                 return Color(tuple(min(c, 1.0) for c in value.rgb), value.wavelengths,
@@ -298,7 +342,8 @@ class _Builder:
             path = self.file(node, "filename", "mesh")
             try:
                 mesh = memoized(path, (obj.type, p.get("flip_tex_coords"),
-                                       p.get("shape_index")), lambda: _read_mesh(obj, path))
+                                       p.get("shape_index")),
+                                lambda: meshes.read_mesh(obj.type, path, obj.params))
             except MeshError as e:
                 raise scene_error(f"{self.what(node)}: cannot load mesh file '{p['filename']}':"
                                   f" {e}", _loc(node, "filename")) from None
@@ -322,7 +367,7 @@ class _Builder:
         obj.bsdf = bsdfs[0][0] if bsdfs else self.default("bsdf", "diffuse")
         if ems:
             em, ch = ems[0]
-            if em.type != "area":
+            if em.type != "area" and em.decl is None:
                 raise scene_error(f"only an 'area' emitter can be attached to a shape, not "
                                   f"'{em.type}'", ch.loc)
             obj.emitter = em
@@ -330,6 +375,8 @@ class _Builder:
     def finish_bsdf(self, obj: Plugin, node: ObjectNode, objects: dict) -> None:
         p = obj.params
         obj.children = [b for b, _ in objects.get("bsdf", [])]
+        if obj.decl is not None:  # a user plugin: its params are its own, not Mitsuba's
+            return
         if "material" in p:
             given = [k for k in ("eta", "k") if p[k] is not None]
             if given and "material" in node.props:
@@ -363,9 +410,9 @@ class _Builder:
 
     def finish_texture(self, obj: Plugin, node: ObjectNode, objects: dict) -> None:
         p = obj.params
-        if p.get("to_uv") is None:
+        if p.get("to_uv") is None and (obj.decl is None or "to_uv" in p):
             p["to_uv"] = xf.identity()
-        if obj.type == "bitmap":
+        if obj.type == "bitmap" and obj.decl is None:
             path = self.file(node, "filename", "texture")
             if path.suffix.lower() not in BITMAP_FORMATS:
                 raise scene_error(f"bitmap: image format '{path.suffix}' of '{p['filename']}' "
@@ -375,6 +422,8 @@ class _Builder:
 
     def finish_emitter(self, obj: Plugin, node: ObjectNode, objects: dict) -> None:
         p = obj.params
+        if obj.decl is not None:
+            return
         if "to_world" in p and p["to_world"] is None:
             p["to_world"] = xf.identity()
         if obj.type == "point" and p["position"] is not None:
@@ -509,14 +558,9 @@ class _Builder:
                               _loc(node, "sample_count"))
 
 
-def _read_mesh(obj: Shape, path: Path) -> Mesh:
-    """A mesh file parsed (``to_world`` not applied: the result is shared by reloads)."""
-    p = obj.params
-    if obj.type == "obj":
-        return meshes.load_obj(path, p["flip_tex_coords"])
-    if obj.type == "ply":
-        return meshes.load_ply(path, p["flip_tex_coords"])
-    return meshes.load_serialized(path, p["shape_index"])
+def _declared(name: str, p: Param) -> str:
+    """Where a user plugin's param is declared, for messages ("" for Mitsuba's)."""
+    return f" (declared `param {name}: {p.rdsl_type}` at {p.decl})" if p.decl else ""
 
 
 def _param_str(node: ObjectNode, name: str) -> str:

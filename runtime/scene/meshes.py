@@ -477,3 +477,12 @@ def _parse_serialized(raw: bytes, version: int) -> Mesh:
         raise MeshError(f"truncated mesh data ({e})") from None
     return Mesh(v, f, n, uv, face_normals=bool(flags & SER_FACE_NORMALS)).validate()
 
+
+def read_mesh(kind: str, path: Path, params: dict) -> Mesh:
+    """A mesh file of shape type ``kind`` (obj, ply, serialized) parsed with the shape's
+    ``params`` (``to_world`` not applied: the result is shared by reloads)."""
+    if kind == "obj":
+        return load_obj(path, params["flip_tex_coords"])
+    if kind == "ply":
+        return load_ply(path, params["flip_tex_coords"])
+    return load_serialized(path, params["shape_index"])

@@ -13,7 +13,13 @@ A parameter's ``kind`` says which XML values it accepts:
 ``color``     ``<float>``, ``<rgb>``, ``<spectrum>`` or a ``<texture>`` (nested or ``<ref>``)
 ``ftex``      ``<float>`` or a ``<texture>`` (a scalar texture, e.g. roughness)
 ``ior``       ``<float>`` or ``<string>`` naming a dielectric (``"bk7"``, ``"water"``)
+``spectrum``  ``<float>``, ``<rgb>`` or ``<spectrum>`` (a ``Spectrum`` param of a user plugin)
+``vec3``      ``<vector>``, ``<point>`` or ``<rgb>`` (a ``Vec3`` param of a user plugin)
+``unset``     nothing: a param the scene cannot set (``Vec2``, ``Vec4`` of a user plugin)
 ============  ===================================================================
+
+User plugins (runtime/plugins.py) get a :class:`PluginSpec` made from their ``param``
+declarations, whose ``decl`` fields say where the plugin and each param are declared.
 
 ``REQUIRED`` marks a parameter without a default; ``None`` one that is optional and whose
 absence the loader resolves (e.g. ``crop_width`` defaults to ``width``).
@@ -37,16 +43,22 @@ KIND_ACCEPTS: dict[str, tuple[str, ...]] = {
     "color": ("float", "integer", "rgb", "spectrum", "texture"),
     "ftex": ("float", "integer", "texture"),
     "ior": ("float", "integer", "string"),
+    "spectrum": ("float", "integer", "rgb", "spectrum"),
+    "vec3": ("vector", "point", "rgb"),
+    "unset": (),
 }
 
 
 @dataclass(frozen=True)
 class Param:
-    """One accepted parameter: its kind, Mitsuba's default, and allowed values for strings."""
+    """One accepted parameter: its kind, Mitsuba's default, and allowed values for strings;
+    for a user plugin's param, its rdsl type and declaration (``file:line``)."""
 
     kind: str
     default: Any = None
     choices: tuple[str, ...] | None = None
+    rdsl_type: str | None = None
+    decl: str | None = None
 
 
 @dataclass(frozen=True)
@@ -57,6 +69,7 @@ class PluginSpec:
     type: str
     params: dict[str, Param]
     children: dict[str, tuple[int, int]] = field(default_factory=dict)
+    decl: Any = None  # a user plugin's runtime.plugins.PluginDecl (None: Mitsuba's schema)
 
 
 def P(kind: str, default: Any = None, choices: tuple[str, ...] | None = None) -> Param:

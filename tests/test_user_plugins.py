@@ -1,0 +1,373 @@
+"""User plugins in scenes (docs/plugins.md): discovery, parameters, errors, and renders.
+
+The independent truth for rendering is the stdlib: a copy of ``diffuse`` (and of the
+``area`` emitter) under other names, next to a copy of the Cornell box, must give the stdlib
+image bit for bit, in every way a scene is built (specialized, generic, nested in
+``blendbsdf``, spectral, polarized).  Search order, shadowing and each user mistake are
+checked on the loaded scene description (no compile).  The example plugins of
+examples/plugins/ are checked against closed forms: Oren-Nayar against PBRT's formula and
+against Lambert at sigma = 0, its sampling by chi-square; the wood texture's range.
+"""
+
+from __future__ import annotations
+
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+import rdsl
+from rdsl.compiler.diagnostics import CompileError
+from rdsl.runtime import plugins as registry
+from rdsl.runtime.scene import SceneError, load_scene_description
+from rdsl.runtime.testkit.chi2 import chi2_directions
+from rdsl.runtime.testkit.harness import Harness, declarations
+
+ROOT = Path(__file__).resolve().parents[1]
+CBOX = ROOT.parent / "shared" / "scenes" / "cbox" / "cbox.xml"
+STDLIB = ROOT / "stdlib"
+EXAMPLES = ROOT / "examples" / "plugins"
+SMALL = {"res": 16, "spp": 2}
+f32 = np.float32
+
+pytestmark = pytest.mark.skipif(not CBOX.is_file(), reason=f"{CBOX} is not present")
+
+
+def renamed(kind_file: str, old: str, new: str) -> str:
+    """A stdlib plugin's source with the plugin renamed."""
+    src = (STDLIB / kind_file).read_text()
+    out = re.sub(rf"^(bsdf|emitter|texture) {old} \{{", rf"\1 {new} {{", src, flags=re.MULTILINE)
+    assert out != src
+    return out
+
+
+def cbox_with(folder: Path, bsdf: str = "diffuse", emitter: str = "area",
+              name: str = "cbox.xml") -> Path:
+    """The Cornell box written to ``folder`` with its BSDF and emitter types replaced."""
+    text = CBOX.read_text().replace('type="diffuse"', f'type="{bsdf}"')
+    text = text.replace('<emitter type="area">', f'<emitter type="{emitter}">')
+    folder.mkdir(parents=True, exist_ok=True)
+    (folder / name).write_text(text)
+    return folder / name
+
+
+def scene(folder: Path, bsdf_xml: str, name: str = "scene.xml") -> Path:
+    """A one-rectangle scene whose BSDF is ``bsdf_xml`` (line 3 of the file)."""
+    folder.mkdir(parents=True, exist_ok=True)
+    path = folder / name
+    path.write_text('<scene version="3.0.0">\n    <shape type="rectangle">\n'
+                    f'{bsdf_xml}\n    </shape>\n</scene>\n')
+    return path
+
+
+@pytest.fixture(scope="module")
+def user(tmp_path_factory) -> Path:
+    """A folder with `mydiffuse` and `myarea` (the stdlib's diffuse and area, renamed) next
+    to a copy of the Cornell box that uses them."""
+    d = tmp_path_factory.mktemp("user")
+    (d / "mydiffuse.rdsl").write_text(renamed("bsdf/diffuse.rdsl", "diffuse", "mydiffuse"))
+    (d / "myarea.rdsl").write_text(renamed("emitter/area.rdsl", "area", "myarea"))
+    cbox_with(d, "mydiffuse", "myarea")
+    return d
+
+
+def render(path: Path, **kw) -> np.ndarray:
+    return rdsl.load_scene(path, **SMALL, **kw).render()
+
+
+# ---------------------------------------------------------------------------- renders
+
+@pytest.mark.parametrize("variant,specialize", [("rgb", True), ("rgb", False),
+                                                ("spectral", True), ("mono_polarized", True)])
+def test_renamed_diffuse_renders_bit_identical(user, variant, specialize):
+    mine = rdsl.load_scene(user / "cbox.xml", variant=variant, specialize=specialize, **SMALL)
+    assert {"mydiffuse", "myarea"} <= set(mine.desc.plugins)
+    got = mine.render()
+    want = render(CBOX, variant=variant, specialize=specialize)
+    assert np.array_equal(got, want)
+    assert any("instance(s) of mydiffuse" in line for line in mine.report)  # --report
+
+
+def test_user_bsdf_nested_in_blendbsdf(user, tmp_path):
+    def blend(a: str, b: str) -> str:
+        return (f'<bsdf type="blendbsdf"><float name="weight" value="0.3"/>'
+                f'<bsdf type="{a}"><rgb name="reflectance" value="0.8, 0.2, 0.1"/></bsdf>'
+                f'<bsdf type="{b}"><float name="reflectance" value="0.4"/></bsdf></bsdf>')
+
+    text = CBOX.read_text()
+    for folder, (a, b) in (("mine", ("mydiffuse", "mydiffuse")), ("std", ("diffuse", "diffuse"))):
+        out = text.replace('<ref id="white"/>\n    </shape>\n    <shape type="rectangle" '
+                           'id="ceiling">', f'{blend(a, b)}\n    </shape>\n    <shape '
+                           'type="rectangle" id="ceiling">')
+        assert out != text
+        (tmp_path / folder).mkdir()
+        (tmp_path / folder / "cbox.xml").write_text(out)
+    got = render(tmp_path / "mine" / "cbox.xml", plugins=[user])
+    assert np.array_equal(got, render(tmp_path / "std" / "cbox.xml"))
+
+
+def test_user_texture_renders():
+    """A user texture (the wood example) renders, on a reflectance and, through its eval_1,
+    on a roughness."""
+    img = render(EXAMPLES / "wood.xml")
+    assert img.shape == (16, 16, 3) and np.all(np.isfinite(img)) and img.mean() > 0.01
+
+
+# ---------------------------------------------------------------------------- discovery
+
+def test_search_order_and_shadowing(tmp_path, monkeypatch):
+    """Scene folder, then --plugins, then $RDSL_PLUGIN_PATH, then the stdlib; each
+    shadowing names both files."""
+    src = renamed("bsdf/diffuse.rdsl", "diffuse", "shade")
+    for d in ("scene", "cli", "env"):
+        (tmp_path / d).mkdir()
+        (tmp_path / d / "shade.rdsl").write_text(src)
+    monkeypatch.setenv("RDSL_PLUGIN_PATH", str(tmp_path / "env"))
+    path = scene(tmp_path / "scene", '<bsdf type="shade"/>')
+    with pytest.warns(UserWarning) as w:
+        desc = load_scene_description(path, plugins=[tmp_path / "cli"])
+    assert desc.plugins["shade"].path == tmp_path / "scene" / "shade.rdsl"
+    text = " ".join(str(x.message) for x in w)
+    for d in ("scene", "cli", "env"):
+        assert str(tmp_path / d / "shade.rdsl") in text
+    (tmp_path / "scene" / "shade.rdsl").unlink()
+    with pytest.warns(UserWarning):
+        desc = load_scene_description(path, plugins=[tmp_path / "cli"])
+    assert desc.plugins["shade"].path == tmp_path / "cli" / "shade.rdsl"
+    (tmp_path / "cli" / "shade.rdsl").unlink()
+    desc = load_scene_description(path, plugins=[tmp_path / "cli"])
+    assert desc.plugins["shade"].path == tmp_path / "env" / "shade.rdsl"
+
+
+def test_shadowing_a_stdlib_plugin_warns_naming_both_files(tmp_path):
+    (tmp_path / "diffuse.rdsl").write_text((STDLIB / "bsdf" / "diffuse.rdsl").read_text())
+    path = scene(tmp_path, '<bsdf type="diffuse"/>')
+    with pytest.warns(UserWarning, match="shadows") as w:
+        desc = load_scene_description(path)
+    assert str(tmp_path / "diffuse.rdsl") in str(w[0].message)
+    assert str(STDLIB / "bsdf" / "diffuse.rdsl") in str(w[0].message)
+    assert desc.plugins["diffuse"].path == tmp_path / "diffuse.rdsl"
+    assert desc.shapes[0].bsdf.decl is not None  # its own params, not Mitsuba's
+
+
+def test_load_scene_plugins_and_register_plugin(tmp_path, monkeypatch):
+    monkeypatch.setattr(registry, "_REGISTERED", [])
+    monkeypatch.setenv("RDSL_CACHE_DIR", str(tmp_path / "cache"))
+    (tmp_path / "lib").mkdir()
+    (tmp_path / "lib" / "velvety.rdsl").write_text(
+        renamed("bsdf/diffuse.rdsl", "diffuse", "velvety"))
+    path = scene(tmp_path / "s", '<bsdf type="velvety"><float name="reflectance" '
+                 'value="0.3"/></bsdf>')
+    with pytest.raises(SceneError, match="unknown bsdf plugin 'velvety'"):
+        load_scene_description(path)
+    desc = load_scene_description(path, plugins=[tmp_path / "lib"])
+    assert desc.plugins["velvety"].path == tmp_path / "lib" / "velvety.rdsl"
+    # a file, and source text (written to the cache), both registered for every scene
+    assert rdsl.register_plugin(tmp_path / "lib" / "velvety.rdsl") == ["velvety"]
+    assert load_scene_description(path).plugins["velvety"].path == tmp_path / "lib" / \
+        "velvety.rdsl"
+    source = renamed("bsdf/diffuse.rdsl", "diffuse", "velvety")
+    assert rdsl.register_plugin(source) == ["velvety"]  # replaces the file's registration
+    got = load_scene_description(path).plugins["velvety"].path
+    assert got.is_relative_to(tmp_path / "cache") and got.read_text() == source
+    with pytest.raises(CompileError, match="declares no plugin"):
+        rdsl.register_plugin("fn f() -> Float { return 1.0; }\n")
+
+
+def test_cli_plugins_option(user, tmp_path):
+    """`rdsl render --plugins DIR` finds a plugin for a scene elsewhere."""
+    path = cbox_with(tmp_path / "elsewhere", "mydiffuse", "area")
+    cmd = [sys.executable, "-m", "rdsl.cli", "render", str(path), "-o", str(tmp_path / "o.exr"),
+           "-D", "res=8", "-D", "spp=1", "--quiet"]
+    bad = subprocess.run(cmd, check=False, capture_output=True, text=True, cwd=tmp_path)
+    assert bad.returncode == 1 and "unknown bsdf plugin 'mydiffuse'" in bad.stderr
+    assert "Traceback" not in bad.stderr
+    ok = subprocess.run(cmd + ["--plugins", str(user)], check=False, capture_output=True,
+                        text=True, cwd=tmp_path)
+    assert ok.returncode == 0, ok.stderr
+    assert (tmp_path / "o.exr").is_file()
+
+
+# ---------------------------------------------------------------------------- errors
+
+def test_syntax_error_in_plugin_is_a_diagnostic_at_its_line(tmp_path):
+    src = renamed("bsdf/diffuse.rdsl", "diffuse", "broken").replace(
+        "let cos_theta_o = cos_theta(wo);", "let cos_theta_o = cos_theta(wo)")
+    (tmp_path / "broken.rdsl").write_text(src)
+    with pytest.raises(CompileError) as e:
+        load_scene_description(scene(tmp_path, '<bsdf type="broken"/>'))
+    line = src.splitlines().index("        let cos_theta_o = cos_theta(wo)") + 1
+    assert f"broken.rdsl:{line}:40: error: expected `;`" in str(e.value), str(e.value)
+
+
+def test_missing_interface_function_is_a_diagnostic_at_the_plugin(tmp_path):
+    src = renamed("bsdf/diffuse.rdsl", "diffuse", "nopdf")
+    src = re.sub(r"    fn pdf\(.*?\n    }\n", "", src, flags=re.DOTALL)
+    (tmp_path / "nopdf.rdsl").write_text(src)
+    with pytest.raises(CompileError) as e:
+        load_scene_description(scene(tmp_path, '<bsdf type="nopdf"/>'))
+    line = src.splitlines().index("bsdf nopdf {") + 1
+    assert f"nopdf.rdsl:{line}:" in str(e.value)
+    assert "missing the required function `fn pdf(si: Surface, wo: Vec3) -> Float`" in \
+        str(e.value)
+
+
+def _param_line(path: Path, name: str) -> int:
+    return next(i for i, t in enumerate(path.read_text().splitlines(), 1)
+                if re.match(rf"\s*param {name}\b", t))
+
+
+def test_wrong_parameter_type_names_xml_line_and_declaration(tmp_path):
+    (tmp_path / "orennayar.rdsl").write_text((EXAMPLES / "orennayar.rdsl").read_text())
+    path = scene(tmp_path, '<bsdf type="orennayar">\n'
+                 '    <rgb name="sigma" value="0.1, 0.2, 0.3"/>\n</bsdf>')
+    with pytest.raises(SceneError) as e:
+        load_scene_description(path)
+    text = str(e.value)
+    assert text.startswith(f"{path}:4:"), text
+    decl = f"{tmp_path / 'orennayar.rdsl'}:{_param_line(tmp_path / 'orennayar.rdsl', 'sigma')}"
+    assert "expects a float or a texture, got <rgb>" in text and decl in text
+    assert "`param sigma: Float`" in text
+
+
+def test_unknown_and_string_properties_are_errors(tmp_path):
+    (tmp_path / "orennayar.rdsl").write_text((EXAMPLES / "orennayar.rdsl").read_text())
+    path = scene(tmp_path, '<bsdf type="orennayar">\n    <float name="roughness" value="1"/>'
+                 '\n</bsdf>')
+    with pytest.raises(SceneError) as e:
+        load_scene_description(path)
+    assert str(e.value).startswith(f"{path}:4:")
+    assert "unknown parameter 'roughness'" in str(e.value)
+    assert "accepted: reflectance, sigma" in str(e.value)
+    assert f"{tmp_path / 'orennayar.rdsl'}:" in str(e.value)
+    path = scene(tmp_path, '<bsdf type="orennayar">\n    <string name="sigma" value="x"/>'
+                 '\n</bsdf>', "s2.xml")
+    with pytest.raises(SceneError, match="is a string"):
+        load_scene_description(path)
+
+
+def test_missing_parameter_takes_the_declared_default_or_is_required(tmp_path):
+    src = (EXAMPLES / "orennayar.rdsl").read_text()
+    (tmp_path / "orennayar.rdsl").write_text(src)
+    desc = load_scene_description(scene(tmp_path, '<bsdf type="orennayar"/>'))
+    from rdsl.runtime.render.bsdfs import bsdf_instance
+    assert bsdf_instance(desc.shapes[0].bsdf).params == {}  # specialize takes the defaults
+    (tmp_path / "orennayar.rdsl").write_text(src.replace("param sigma: Float = 20.0;",
+                                                         "param sigma: Float;"))
+    registry._checked.cache_clear()
+    with pytest.raises(SceneError, match="missing the required parameter 'sigma'"):
+        load_scene_description(scene(tmp_path, '<bsdf type="orennayar"/>', "s2.xml"))
+
+
+def test_two_plugins_with_one_name_in_one_folder(tmp_path):
+    src = renamed("bsdf/diffuse.rdsl", "diffuse", "twin")
+    (tmp_path / "a.rdsl").write_text(src)
+    (tmp_path / "b.rdsl").write_text(src)
+    with pytest.raises(CompileError) as e:
+        load_scene_description(scene(tmp_path, '<bsdf type="twin"/>'))
+    assert str(tmp_path / "a.rdsl") in str(e.value) and str(tmp_path / "b.rdsl") in str(e.value)
+    assert "two bsdf plugins named `twin`" in str(e.value)
+
+
+# ---------------------------------------------------------------------------- the examples
+
+ORENNAYAR = EXAMPLES / "orennayar.rdsl"
+
+
+def oren_nayar_np(wi: np.ndarray, wo: np.ndarray, r: float, sigma: float) -> np.ndarray:
+    """f cos(theta_o) of PBRT's OrenNayar::f, in float64 (an independent implementation)."""
+    s2 = np.radians(sigma) ** 2
+    a, b = 1 - s2 / (2 * (s2 + 0.33)), 0.45 * s2 / (s2 + 0.09)
+    ti, to = np.arccos(wi[:, 2]), np.arccos(wo[:, 2])
+    dphi = np.cos(np.arctan2(wi[:, 1], wi[:, 0]) - np.arctan2(wo[:, 1], wo[:, 0]))
+    alpha, beta = np.maximum(ti, to), np.minimum(ti, to)
+    f = r / np.pi * (a + b * np.maximum(0, dphi) * np.sin(alpha) * np.tan(beta))
+    return np.where((wi[:, 2] > 0) & (wo[:, 2] > 0), f * wo[:, 2], 0.0)
+
+
+def hemisphere(n: int, seed: int) -> np.ndarray:
+    v = np.random.default_rng(seed).normal(size=(n, 3))
+    v[:, 2] = np.abs(v[:, 2]) + 1e-3
+    return (v / np.linalg.norm(v, axis=1, keepdims=True)).astype(f32)
+
+
+def surface(wi: np.ndarray) -> dict:
+    n = len(wi)
+    z = np.tile(f32([0, 0, 1]), (n, 1))
+    return {"p": np.zeros((n, 3), f32), "n": z, "sh_n": z, "uv": np.zeros((n, 2), f32),
+            "wi": np.ascontiguousarray(wi, f32), "t": np.ones(n, f32), "valid": np.ones(n, bool)}
+
+
+@pytest.fixture(scope="module")
+def oren():
+    return Harness(variant="rgb", decl=next(d for d in declarations(ORENNAYAR) if d.name == "orennayar"))
+
+
+@pytest.mark.parametrize("sigma", [10.0, 35.0])
+def test_orennayar_matches_pbrt_and_samples_its_pdf(oren, sigma):
+    wi, wo = hemisphere(4000, 1), hemisphere(4000, 2)
+    got = oren.eval(surface(wi), wo, reflectance=0.6, sigma=sigma)
+    np.testing.assert_allclose(got[:, 0], oren_nayar_np(wi.astype(np.float64),
+                                                        wo.astype(np.float64), 0.6, sigma),
+                               rtol=2e-4, atol=1e-6)
+    n = 400_000
+    rng = np.random.default_rng(7)
+    for theta in (0.3, 1.2):
+        w = np.tile(f32([np.sin(theta), 0.0, np.cos(theta)]), (n, 1))
+        bs = oren.sample(surface(w), rng.random(n).astype(f32), rng.random((n, 2)).astype(f32),
+                         reflectance=0.6, sigma=sigma)
+        valid = bs["pdf"] > 0
+
+        def pdf(d, w0=w[0]):
+            return np.asarray(oren.pdf(surface(np.tile(w0, (len(d), 1))),
+                                       np.ascontiguousarray(d, f32), reflectance=0.6,
+                                       sigma=sigma), np.float64)
+
+        assert chi2_directions(bs["wo"], valid, pdf, n) > 1e-3
+        # weight = eval / pdf, and the albedo (the mean weight) is at most 1
+        k = np.flatnonzero(valid)[:2000]
+        e = oren.eval(surface(w[k]), bs["wo"][k], reflectance=0.6, sigma=sigma)
+        np.testing.assert_allclose(bs["weight"][k, 0], e[:, 0] / bs["pdf"][k], rtol=1e-4)
+        assert bs["weight"][valid, 0].mean() <= 1.0
+
+
+def test_orennayar_at_sigma_0_is_lambert(oren):
+    lam = Harness("diffuse", "rgb")
+    wi, wo = hemisphere(3000, 3), hemisphere(3000, 4)
+    u1, u2 = np.random.default_rng(5).random(3000).astype(f32), \
+        np.random.default_rng(6).random((3000, 2)).astype(f32)
+    si = surface(wi)
+    np.testing.assert_array_equal(oren.eval(si, wo, reflectance=0.7, sigma=0.0),
+                                  lam.eval(si, wo, reflectance=0.7))
+    np.testing.assert_array_equal(oren.pdf(si, wo, sigma=0.0), lam.pdf(si, wo))
+    a = oren.sample(si, u1, u2, reflectance=0.7, sigma=0.0)
+    b = lam.sample(si, u1, u2, reflectance=0.7)
+    for key in ("wo", "pdf", "weight"):
+        np.testing.assert_array_equal(a[key], b[key])
+
+
+def test_wood_texture_range():
+    mod = rdsl.jit(EXAMPLES / "wood.rdsl", target="host")
+    uv = np.random.default_rng(9).uniform(-20, 20, (20000, 2)).astype(f32)
+    n = len(uv)
+    z = np.zeros((n, 3), f32)
+    si = {"p": z, "n": z, "sh_n": z, "uv": uv, "wi": np.tile(f32([0, 0, 1]), (n, 1)),
+          "t": np.ones(n, f32), "valid": np.ones(n, bool)}
+    t = np.asarray(mod["wood.eval_1"](si))
+    assert t.min() >= 0.0 and t.max() <= 1.0 and t.std() > 0.2  # rings: both extremes
+    c = np.asarray(mod["wood.eval"](si, early=(1.0, 1.0, 1.0), late=(0.0, 0.0, 0.0)))
+    assert c.min() >= 0.0 and c.max() <= 1.0
+    np.testing.assert_allclose(c[:, 0], 1.0 - t, atol=1e-6)
+
+
+def test_examples_render_from_the_command_line(tmp_path):
+    for name in ("orennayar", "wood"):
+        out = tmp_path / f"{name}.exr"
+        r = subprocess.run([sys.executable, "-m", "rdsl.cli", "render",
+                            str(EXAMPLES / f"{name}.xml"), "-o", str(out), "-D", "res=8",
+                            "-D", "spp=1", "--quiet"], capture_output=True, text=True,
+                           check=False)
+        assert r.returncode == 0, r.stderr
+        assert out.is_file()
