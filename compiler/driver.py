@@ -103,4 +103,4 @@ def compile_kernels(source_or_path: str | Path, build: Build, filename: str | No
     module = frontend(source_or_path, filename, search_paths)
     run_passes(module, pipeline(build, scene, report))
     module.attrs["target"] = build.target.name
-    return module, source_files(source_or_path, search_paths or (), filename)
+    return module, source_files(source_or_path, search_paths or (), filename=filename)

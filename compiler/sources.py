@@ -46,7 +46,7 @@ def read_source(source_or_path: str | os.PathLike) -> tuple[str, Path | None]:
         raise CompileError(f"cannot read `{path}`: {why}") from None
 
 
-def source_files(source_or_path: str | Path, search_paths: Iterable[str | Path] = (),
+def source_files(source_or_path: str | Path, search_paths: Iterable[str | Path] = (), *,
                  filename: str | None = None) -> list[Path]:
     """The main file (if any), everything it imports, and the prelude, resolved the way the
     frontend resolves imports (``dsl/imports.py``: next to the importing file, then in

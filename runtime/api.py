@@ -199,7 +199,7 @@ def jit(source_or_path: str | os.PathLike, target: str | Target = "host",
     build = build or Build.of(target, variant)
     text = _source_text(source_or_path)
     files = [Path(f) for f in source_files(source_or_path, options.get("search_paths") or (),
-                                           options.get("filename"))]
+                                           filename=options.get("filename"))]
     # the file name only labels diagnostics, and a cached build had none: scenes copied to
     # another directory share their kernels; the search paths count through the files they
     # resolved (their paths and texts are keyed)

@@ -195,5 +195,5 @@ def test_source_text_imports_next_to_its_filename(tmp_path):
     """Source text compiled under a file name imports from that file's folder, and the
     kernel cache hashes what it imports (test-plugin's harness depends on it)."""
     (tmp_path / "mine.rdsl").write_text("fn one() -> Float { return 1.0; }\n")
-    files = source_files("import mine;\n", str(tmp_path / "harness.rdsl"))
+    files = source_files("import mine;\n", filename=str(tmp_path / "harness.rdsl"))
     assert (tmp_path / "mine.rdsl").resolve() in files

@@ -253,7 +253,10 @@ def _kernel_sources(scene: Scene) -> list[Path]:
     from ...compiler.sources import source_files
 
     text = getattr(scene, "kernel_src", None)
-    return source_files(text) if text is not None else []
+    if text is None:
+        return []
+    return source_files(text, getattr(scene, "search_paths", ()),
+                        filename=str(scene.path.with_suffix(".rdsl")))
 
 
 def watch(scene: Scene, job: WatchJob, **options: Any) -> int:
