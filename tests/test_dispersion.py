@@ -100,7 +100,7 @@ def test_plugin_on_its_own_has_no_dispersion():
     """The dielectric compiled on its own in a spectral variant has no wavelengths (`if const
     wavelengths` is false there): it refracts by n at 589.3 nm, as mono and rgb do."""
     import rdsl
-    from rdsl.runtime.render.bsdfs import STDLIB
+    from rdsl.compiler.sources import STDLIB
 
     mod = rdsl.jit(str(STDLIB / "bsdf" / "dielectric.rdsl"), target="host", variant="spectral")
     n, wi = 4096, wi_at(0.8)
