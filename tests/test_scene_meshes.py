@@ -9,22 +9,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from rdsl.runtime.scene import load_scene_description, meshes
-
-
-def write(path: Path, *lines: str) -> Path:
-    path.write_text("\n".join(lines) + "\n")
-    return path
-
-
-def scene(tmp_path: Path, *body: str, name: str = "scene.xml") -> Path:
-    """A scene file: line 1 is <scene version="3.0.0">, body starts on line 2."""
-    return write(tmp_path / name, '<scene version="3.0.0">', *body, "</scene>")
-
-
-def load(path: Path, **kw):
-    return load_scene_description(path, **kw)
-
+from rdsl.runtime.scene import meshes
+from test_scene_parser import load, scene, write
 
 # ---------------------------------------------------------------------------------------
 # Meshes
