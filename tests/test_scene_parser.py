@@ -69,7 +69,7 @@ BAD_SCENES = {
                          '    <integer name="max_depth" value="$depth"/>', '</integrator>'], 3,
                         "undefined parameter '$depth'"),
     "unknown_ref": (['<shape type="cube">', '    <ref id="nothere"/>', '</shape>'], 3,
-                    "no object with id 'nothere' was declared before this point"),
+                    "no object with id 'nothere' is declared in the scene"),
     "duplicate_id": (['<bsdf type="diffuse" id="a"/>', '<bsdf type="diffuse" id="a"/>'], 3,
                      "duplicate id 'a'"),
     "duplicate_param": (['<shape type="sphere">', '    <float name="radius" value="1"/>',

@@ -29,6 +29,7 @@ from ..plugins import PluginDecl, PluginRegistry, scene_spec, stdlib_names
 from . import meshes
 from . import transform as xf
 from .analytic import Analytic
+from .camera import fov_x
 from .errors import scene_error
 from .meshes import Mesh, MeshError
 from .reads import memoized
@@ -36,6 +37,7 @@ from .schema import (
     AOV_TYPES,
     BITMAP_FORMATS,
     KIND_ACCEPTS,
+    KIND_NAMES,
     REQUIRED,
     SCENE_CHILDREN,
     Param,
@@ -48,13 +50,6 @@ from .xml import Child, ObjectNode, Prop, SceneTree, read_scene
 # the largest Cauchy B term accepted (um^2): glasses are below 0.02, so a larger value is a
 # unit mistake (nm^2) rather than a material
 MAX_CAUCHY_B = 1.0
-_KIND_NAMES = {"float": "a float", "integer": "an integer", "boolean": "a boolean",
-               "string": "a string", "point": "a point", "vector": "a vector",
-               "transform": "a transform", "color": "a color (float, rgb, spectrum or texture)",
-               "ftex": "a float or a texture", "ior": "a float or a named IOR string",
-               "spectrum": "a color (float, rgb or spectrum)",
-               "vec3": "a vector, point or rgb", "unset": "nothing (it is not settable "
-               "from a scene; give it a default in the plugin)"}
 
 
 @dataclass
@@ -252,9 +247,10 @@ class _Builder:
                                         prop.loc)
         for ch in node.children:
             cat = ch.node.category
+            ref = f" (a <ref> to '{ch.node.id}', declared at {ch.node.loc})" if ch.is_ref else ""
             if cat == "texture":
                 if ch.name is None:
-                    raise scene_error(f"a <texture> nested in {self.what(node)} needs a "
+                    raise scene_error(f"a <texture>{ref} nested in {self.what(node)} needs a "
                                       "name=\"...\" attribute naming the parameter it sets "
                                       f"(accepted: {accepted})", ch.loc)
                 if ch.name not in spec.params:
@@ -264,9 +260,12 @@ class _Builder:
                                                ch.node, ch.loc)
                 continue
             if cat not in spec.children:
+                if ch.name in spec.params:
+                    raise scene_error(f"parameter '{ch.name}' of {self.what(node)} expects "
+                                      f"{KIND_NAMES[spec.params[ch.name].kind]}, got a "
+                                      f"<{cat}>{ref}", ch.loc)
                 acc = ", ".join(f"<{c}>" for c in spec.children) or "no nested objects"
-                extra = f" (a <ref> to '{ch.node.id}')" if ch.is_ref else ""
-                raise scene_error(f"{self.what(node)} does not accept a nested <{cat}>{extra}; "
+                raise scene_error(f"{self.what(node)} does not accept a nested <{cat}>{ref}; "
                                   f"it accepts {acc}", ch.loc)
             objects[cat].append((self.instantiate(ch.node), ch))
         for name, p in spec.params.items():
@@ -274,7 +273,7 @@ class _Builder:
                 continue
             if p.default is REQUIRED:
                 raise scene_error(f"{self.what(node)} is missing the required parameter "
-                                  f"'{name}' ({_KIND_NAMES[p.kind]}){_declared(name, p)}",
+                                  f"'{name}' ({KIND_NAMES[p.kind]}){_declared(name, p)}",
                                   node.loc)
             if p.default is not None:
                 params[name] = self.convert(node, name, p, _prop_kind(p.default), p.default,
@@ -290,16 +289,21 @@ class _Builder:
             if kind == "texture" and not isinstance(value, ObjectNode):
                 got = "a texture"
             raise scene_error(f"parameter '{name}' of {self.what(node)} expects "
-                              f"{_KIND_NAMES[p.kind]}, got {got}{_declared(name, p)}", loc)
+                              f"{KIND_NAMES[p.kind]}, got {got}{_declared(name, p)}", loc)
         if kind == "texture":
             return self.instantiate(value)
         if p.kind == "float":
             return float(value)
         if p.kind == "vec3":
             return np.asarray(value.rgb if kind == "rgb" else value, dtype=np.float64)
-        if p.kind in ("color", "ftex", "spectrum"):
+        if p.kind in ("ftex", "fconst"):
+            return float(value) if kind in ("float", "integer") else _constant(value, name, loc)
+        if p.kind in ("color", "spectrum"):
             if kind in ("float", "integer"):
-                return Color.gray(value) if p.kind != "ftex" else float(value)
+                return Color.gray(value)
+            if min(value.rgb) < 0:  # a single negative value is kept for angles (fconst)
+                raise scene_error(f"<{kind} name=\"{name}\">: a color must be non-negative, "
+                                  f"got {value.rgb[0]:g}", loc)
             if node.category != "emitter" and value.wavelengths is not None:
                 # a reflectance spectrum is clamped to [0, 1] (Mitsuba's bounded conversion)
                 return Color(tuple(min(c, 1.0) for c in value.rgb), value.wavelengths,
@@ -497,37 +501,7 @@ class _Builder:
         if p["focus_distance"] is None:
             p["focus_distance"] = p["far_clip"]
         aspect = obj.film["width"] / obj.film["height"]
-        p["fov_x"] = self.fov_x(node, p, aspect)
-
-    def fov_x(self, node: ObjectNode, p: dict, aspect: float) -> float:
-        """Mitsuba's ``parse_fov``: the horizontal field of view in degrees."""
-        if p["fov"] is not None and p["focal_length"] is not None:
-            raise scene_error("give either 'fov' or 'focal_length', not both", _loc(node, "fov"))
-        if p["fov"] is not None:
-            fov, axis = p["fov"], p["fov_axis"]
-            if axis == "smaller":
-                axis = "y" if aspect > 1 else "x"
-            elif axis == "larger":
-                axis = "x" if aspect > 1 else "y"
-        else:
-            f = p["focal_length"] or "50mm"
-            try:
-                value = float(f.removesuffix("mm"))
-            except ValueError:
-                raise scene_error(f"cannot parse focal_length '{f}' (write e.g. \"50mm\")",
-                                  _loc(node, "focal_length")) from None
-            fov, axis = 2 * math.degrees(math.atan(math.hypot(36, 24) / (2 * value))), "diagonal"
-        t = math.tan(math.radians(fov) / 2)
-        if axis == "x":
-            out = fov
-        elif axis == "y":
-            out = 2 * math.degrees(math.atan(t * aspect))
-        else:
-            out = 2 * math.degrees(math.atan(t / math.sqrt(1 + 1 / (aspect * aspect))))
-        if not 0 < out < 180:
-            raise scene_error(f"the horizontal field of view ({out:g} degrees) must be in "
-                              "(0, 180)", _loc(node, "fov"))
-        return out
+        p["fov_x"] = fov_x(p, aspect, lambda k: _loc(node, k))
 
     def finish_film(self, obj: Plugin, node: ObjectNode, objects: dict) -> None:
         p = obj.params
@@ -561,6 +535,17 @@ class _Builder:
 def _declared(name: str, p: Param) -> str:
     """Where a user plugin's param is declared, for messages ("" for Mitsuba's)."""
     return f" (declared `param {name}: {p.rdsl_type}` at {p.decl})" if p.decl else ""
+
+
+def _constant(value: Color, name: str, loc: Loc) -> float:
+    """A ``<spectrum>`` or ``<rgb>`` given for a scalar: the constant it holds.  Mitsuba 3 would
+    take a varying one as a texture evaluated per wavelength; rdsl's scalar params cannot."""
+    vals = value.values if value.wavelengths is not None else value.rgb
+    if max(vals) != min(vals):
+        raise scene_error(f"'{name}' takes a single number here, but the spectrum/rgb given "
+                          f"varies ({', '.join(f'{v:g}' for v in vals)}); give one value",
+                          loc)
+    return float(vals[0])
 
 
 def _param_str(node: ObjectNode, name: str) -> str:

@@ -11,7 +11,11 @@ A parameter's ``kind`` says which XML values it accepts:
 ``vector``    ``<vector>`` or ``<point>``
 ``transform`` ``<transform>``
 ``color``     ``<float>``, ``<rgb>``, ``<spectrum>`` or a ``<texture>`` (nested or ``<ref>``)
-``ftex``      ``<float>`` or a ``<texture>`` (a scalar texture, e.g. roughness)
+``ftex``      ``<float>`` or a ``<texture>`` (a scalar texture, e.g. roughness); also a
+              constant ``<spectrum>`` or ``<rgb>`` (one value, or equal ones), as Mitsuba 3
+              accepts any of its texture forms there
+``fconst``    ``<float>`` or a constant ``<spectrum>`` / ``<rgb>``: a parameter Mitsuba 3 takes
+              as a texture that rdsl takes as a constant (the polarizers' angles)
 ``ior``       ``<float>`` or ``<string>`` naming a dielectric (``"bk7"``, ``"water"``)
 ``spectrum``  ``<float>``, ``<rgb>`` or ``<spectrum>`` (a ``Spectrum`` param of a user plugin)
 ``vec3``      ``<vector>``, ``<point>`` or ``<rgb>`` (a ``Vec3`` param of a user plugin)
@@ -41,12 +45,24 @@ KIND_ACCEPTS: dict[str, tuple[str, ...]] = {
     "vector": ("vector", "point"),
     "transform": ("transform",),
     "color": ("float", "integer", "rgb", "spectrum", "texture"),
-    "ftex": ("float", "integer", "texture"),
+    "ftex": ("float", "integer", "texture", "spectrum", "rgb"),
+    "fconst": ("float", "integer", "spectrum", "rgb"),
     "ior": ("float", "integer", "string"),
     "spectrum": ("float", "integer", "rgb", "spectrum"),
     "vec3": ("vector", "point", "rgb"),
     "unset": (),
 }
+
+# what each kind takes, in words, for error messages
+KIND_NAMES: dict[str, str] = {
+    "float": "a float", "integer": "an integer", "boolean": "a boolean", "string": "a string",
+    "point": "a point", "vector": "a vector", "transform": "a transform",
+    "color": "a color (float, rgb, spectrum or texture)",
+    "ftex": "a float or a texture (or a constant spectrum or rgb)",
+    "fconst": "a constant float (a float, or a spectrum or rgb with one value)",
+    "ior": "a float or a named IOR string", "spectrum": "a color (float, rgb or spectrum)",
+    "vec3": "a vector, point or rgb",
+    "unset": "nothing (it is not settable from a scene; give it a default in the plugin)"}
 
 
 @dataclass(frozen=True)
@@ -132,9 +148,10 @@ _SPECS = [
                                         "alpha": P("ftex", 0.1),
                                         "sample_visible": P("boolean", True)}),
     # polarization: Mitsuba 3's angles are textures; rdsl takes constant degrees
-    PluginSpec("bsdf", "polarizer", {"theta": P("float", 0.0), "transmittance": P("color", 1.0),
+    PluginSpec("bsdf", "polarizer", {"theta": P("fconst", 0.0),
+                                     "transmittance": P("color", 1.0),
                                      "polarizing": P("boolean", True)}),
-    PluginSpec("bsdf", "retarder", {"theta": P("float", 0.0), "delta": P("float", 90.0)}),
+    PluginSpec("bsdf", "retarder", {"theta": P("fconst", 0.0), "delta": P("fconst", 90.0)}),
     PluginSpec("bsdf", "twosided", {}, {"bsdf": (1, 2)}),
     PluginSpec("bsdf", "mask", {"opacity": P("ftex", 0.5)}, {"bsdf": (1, 1)}),
     PluginSpec("bsdf", "blendbsdf", {"weight": P("ftex", REQUIRED)}, {"bsdf": (2, 2)}),

@@ -7,8 +7,9 @@ remember where they came from (expat reports a malformed file's line and column)
 - ``<default name value>`` defines ``$name`` unless ``-D name=value`` already did;
   every attribute then has ``$name`` replaced (an undefined ``$name`` is an error);
 - ``<include filename>`` splices in the children of another file's ``<scene>``;
-- ``<path value>`` adds a directory to search for files;
-- ``<ref id>`` / ``<ref name id>`` stands for an object declared earlier with that ``id``;
+- ``<path value>`` adds a directory to search for files (see :meth:`SceneTree.resolve_file`);
+- ``<ref id>`` / ``<ref name id>`` stands for the object with that ``id``, declared anywhere
+  in the scene: references are resolved once the whole scene is read (:mod:`.refs`);
 - property tags become typed :class:`Prop` values, ``<transform>`` a 4x4 matrix.
 
 The result is a :class:`SceneTree` of :class:`ObjectNode`; plugin parameters are checked
@@ -17,6 +18,7 @@ later, against the schema, by the loader.
 
 from __future__ import annotations
 
+import math
 import re
 import xml.parsers.expat
 from dataclasses import dataclass, field
@@ -30,6 +32,7 @@ from ...compiler.ir import Loc
 from . import transform as xf
 from .errors import file_loc, scene_error
 from .reads import first_file, note
+from .refs import UNRESOLVED, resolve_refs
 from .spectra import Color, parse_numbers, parse_rgb, parse_spectrum, read_spd, spectrum_to_srgb
 
 OBJECT_TAGS = ("shape", "bsdf", "texture", "emitter", "integrator", "sensor", "film",
@@ -141,7 +144,10 @@ class ObjectNode:
 
 @dataclass
 class SceneTree:
-    """The parsed scene: its root object, where to look for files, and the $parameters."""
+    """The parsed scene: its root object, where to look for files, and the $parameters.
+
+    ``search_paths``: the ``<path>`` folders of the main file, the latest first (Mitsuba
+    prepends each to its file resolver); ``include_paths``: those of included files."""
 
     root: ObjectNode
     path: Path
@@ -149,12 +155,22 @@ class SceneTree:
     params: dict[str, str]
     unused_defines: list[str]
     ids: dict[str, ObjectNode]
+    include_paths: list[Path] = field(default_factory=list)
 
     def resolve_file(self, name: str, base_dir: Path, what: str, loc: Loc) -> Path:
-        """Find a file the way Mitsuba's file resolver does, or raise naming it and the line."""
+        """Find a plugin's file (mesh, bitmap, envmap) as Mitsuba 3's file resolver does, or
+        raise naming it and the line.
+
+        Mitsuba looks in the main file's ``<path>`` folders, then the main scene's folder,
+        whichever file names it: a relative name in an included file is relative to the
+        main scene, not to the included file.  Where Mitsuba finds nothing, rdsl also looks
+        in the folders of included files' ``<path>`` elements (Mitsuba 3 forgets those when
+        the include ends) and then in ``base_dir``, the folder of the file that names it, so
+        it finds the same file as Mitsuba whenever Mitsuba finds one."""
         p = Path(name)
         candidates = [p] if p.is_absolute() else [
-            base_dir / p, self.path.parent / p, *(d / p for d in self.search_paths)]
+            *(d / p for d in self.search_paths), self.path.parent / p,
+            *(d / p for d in self.include_paths), base_dir / p]
         found = first_file(candidates)
         if found is not None:
             return found
@@ -180,8 +196,21 @@ class _Reader:
         self.cli_names = set(self.params)
         self.used: set[str] = set()
         self.ids: dict[str, ObjectNode] = {}
-        self.search_paths: list[Path] = []
+        self.search_paths: list[Path] = []   # the main file's <path>s, the latest first
+        self.include_paths: list[Path] = []  # the <path>s of included files
         self.include_stack: list[Path] = []
+        self.refs: list[Child] = []          # every <ref>, resolved once all is read
+
+    def candidates(self, name: str, el: Element) -> list[Path]:
+        """Where a file named while reading ``el`` may be (an include, a spectrum file, a
+        ``<path>`` folder): Mitsuba's resolver while it parses, which holds the folder of the
+        file being read as well as the main scene's."""
+        p = Path(name)
+        if p.is_absolute():
+            return [p]
+        dirs = [*self.search_paths, Path(el.loc.file).parent, self.path.parent,
+                *self.include_paths]
+        return [d / p for d in dict.fromkeys(dirs)]
 
     # -- attributes --------------------------------------------------------------------
     def attrs(self, el: Element) -> dict[str, str]:
@@ -245,11 +274,15 @@ class _Reader:
             if parent.category != "scene":
                 raise scene_error("<path> may only appear directly inside <scene>", el.loc)
             a = self.attrs(el)
-            d = Path(self.need(el, a, "value"))
-            d = d if d.is_absolute() else Path(el.loc.file).parent / d
-            if not d.is_dir():
-                raise scene_error(f"<path>: directory '{a['value']}' not found", el.loc)
-            self.search_paths.append(d)
+            cands = self.candidates(self.need(el, a, "value"), el)
+            d = next((c for c in cands if c.is_dir()), None)
+            if d is None:
+                raise scene_error(f"<path>: directory '{a['value']}' not found (looked in: "
+                                  f"{', '.join(str(c.parent) for c in cands)})", el.loc)
+            if len(self.include_stack) == 1:
+                self.search_paths.insert(0, d)
+            else:
+                self.include_paths.append(d)
         elif tag == "include":
             if parent.category != "scene":
                 raise scene_error("<include> may only appear directly inside <scene>", el.loc)
@@ -257,11 +290,11 @@ class _Reader:
         elif tag == "ref":
             a = self.attrs(el)
             ident = self.need(el, a, "id")
-            if ident not in self.ids:
-                known = ", ".join(self.ids) or "none"
-                raise scene_error(f"<ref>: no object with id '{ident}' was declared before this "
-                                  f"point (known ids: {known})", el.loc)
-            self.add_child(parent, Child(a.get("name"), self.ids[ident], el.loc, True))
+            # a placeholder until the whole scene is read: the object may come later
+            ref = ObjectNode(UNRESOLVED, UNRESOLVED, ident, el.loc, Path(el.loc.file).parent)
+            child = Child(a.get("name"), ref, el.loc, True)
+            self.add_child(parent, child)
+            self.refs.append(child)
         elif tag in OBJECT_TAGS:
             node = self.read_object(el, parent)
             self.add_child(parent, Child(el.attrs.get("name") and self.substitute(
@@ -310,9 +343,7 @@ class _Reader:
     def read_include(self, parent: ObjectNode, el: Element) -> None:
         a = self.attrs(el)
         name = self.need(el, a, "filename")
-        p = Path(name)
-        cands = [p] if p.is_absolute() else [Path(el.loc.file).parent / p,
-                                              *(d / p for d in self.search_paths)]
+        cands = self.candidates(name, el)
         target = first_file(cands)
         if target is None:
             raise scene_error(f"<include>: file '{name}' not found (looked in: "
@@ -338,10 +369,8 @@ class _Reader:
         if tag == "spectrum" and "filename" in a:
             if "value" in a:
                 raise scene_error(f"{what}: give either 'value' or 'filename', not both", el.loc)
-            path = Path(a["filename"])
-            path = path if path.is_absolute() else Path(el.loc.file).parent / path
-            note(path)
-            if not path.is_file():
+            path = first_file(self.candidates(a["filename"], el))
+            if path is None:
                 raise scene_error(f"{what}: spectrum file '{a['filename']}' not found", el.loc)
             wl, vals = read_spd(path, el.loc)
             return Color(spectrum_to_srgb(wl, vals, False), tuple(wl), tuple(vals))
@@ -366,6 +395,9 @@ class _Reader:
             return v == "true"
         if tag == "string":
             return value
+        if tag in ("rgb", "spectrum") and _negative(value):
+            # an angle (Mitsuba takes polarizer angles as spectra); a color rejects it later
+            return Color.gray(float(value))
         if tag == "rgb":
             return parse_rgb(value, el.loc)
         return parse_spectrum(value, el.loc, bounded=False)
@@ -456,6 +488,15 @@ class _Reader:
             raise scene_error(f"<lookat>: {e}", op.loc) from None
 
 
+def _negative(text: str) -> bool:
+    """Whether ``text`` is one finite negative number."""
+    try:
+        v = float(text)
+    except ValueError:
+        return False
+    return math.isfinite(v) and v < 0
+
+
 def read_scene(path: str | Path, defines: dict[str, Any] | None = None) -> SceneTree:
     """Parse a Mitsuba 3 scene file into a :class:`SceneTree`."""
     path = Path(path)
@@ -466,5 +507,6 @@ def read_scene(path: str | Path, defines: dict[str, Any] | None = None) -> Scene
     r.include_stack.append(path.resolve())
     root = r.read_root(root_el, path)
     r.read_children(root, root_el)
+    resolve_refs(r.refs, r.ids, root)
     unused = sorted(r.cli_names - r.used)
-    return SceneTree(root, path, r.search_paths, r.params, unused, r.ids)
+    return SceneTree(root, path, r.search_paths, r.params, unused, r.ids, r.include_paths)

@@ -1,0 +1,42 @@
+"""A camera's horizontal field of view from its ``fov``/``fov_axis`` or ``focal_length``."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from typing import Any
+
+from ...compiler.ir import Loc
+from .errors import scene_error
+
+
+def fov_x(p: dict[str, Any], aspect: float, loc: Callable[[str], Loc]) -> float:
+    """Mitsuba's ``parse_fov``: the horizontal field of view in degrees, from a sensor's
+    resolved params ``p``; ``loc(name)`` is the line of parameter ``name``, for errors."""
+    if p["fov"] is not None and p["focal_length"] is not None:
+        raise scene_error("give either 'fov' or 'focal_length', not both", loc("fov"))
+    if p["fov"] is not None:
+        fov, axis = p["fov"], p["fov_axis"]
+        if axis == "smaller":
+            axis = "y" if aspect > 1 else "x"
+        elif axis == "larger":
+            axis = "x" if aspect > 1 else "y"
+    else:
+        f = p["focal_length"] or "50mm"
+        try:
+            value = float(f.removesuffix("mm"))
+        except ValueError:
+            raise scene_error(f"cannot parse focal_length '{f}' (write e.g. \"50mm\")",
+                              loc("focal_length")) from None
+        fov, axis = 2 * math.degrees(math.atan(math.hypot(36, 24) / (2 * value))), "diagonal"
+    t = math.tan(math.radians(fov) / 2)
+    if axis == "x":
+        out = fov
+    elif axis == "y":
+        out = 2 * math.degrees(math.atan(t * aspect))
+    else:
+        out = 2 * math.degrees(math.atan(t / math.sqrt(1 + 1 / (aspect * aspect))))
+    if not 0 < out < 180:
+        raise scene_error(f"the horizontal field of view ({out:g} degrees) must be in "
+                          "(0, 180)", loc("fov"))
+    return out
