@@ -247,15 +247,16 @@ class _Builder:
                                         prop.loc)
         for ch in node.children:
             cat = ch.node.category
-            ref = f" (a <ref> to '{ch.node.id}', declared at {ch.node.loc})" if ch.is_ref else ""
+            ref = (f" (a <ref> to {cat} '{ch.node.id}', declared at {ch.node.loc})"
+                   if ch.is_ref else "")
             if cat == "texture":
                 if ch.name is None:
                     raise scene_error(f"a <texture>{ref} nested in {self.what(node)} needs a "
                                       "name=\"...\" attribute naming the parameter it sets "
                                       f"(accepted: {accepted})", ch.loc)
                 if ch.name not in spec.params:
-                    raise scene_error(f"unknown parameter '{ch.name}' of {self.what(node)}; "
-                                      f"accepted: {accepted}", ch.loc)
+                    raise scene_error(f"unknown parameter '{ch.name}' of {self.what(node)}{ref}"
+                                      f"; accepted: {accepted}", ch.loc)
                 params[ch.name] = self.convert(node, ch.name, spec.params[ch.name], "texture",
                                                ch.node, ch.loc)
                 continue
