@@ -255,9 +255,10 @@ def test_scalar_texture_params_take_constant_forms(tmp_path: Path, variant: str,
 
 @pytest.mark.parametrize("prop, expected", [
     ('<spectrum name="theta" value="400:10, 700:20"/>',
-     "'theta' takes a single number here, but the spectrum/rgb given varies (10, 20)"),
+     ("parameter 'theta' of bsdf 'polarizer' takes one number (or a texture where Mitsuba "
+     "does), but the <spectrum> given varies (10, 20); give one value")),
     ('<rgb name="theta" value="10, 20, 30"/>',
-     "'theta' takes a single number here, but the spectrum/rgb given varies (10, 20, 30)"),
+     "but the <rgb> given varies (10, 20, 30); give one value"),
     ('<texture type="checkerboard" name="theta"/>',
      ("parameter 'theta' of bsdf 'polarizer' expects a constant float (a float, or a "
       "spectrum or rgb with one value), got a <texture>")),

@@ -221,14 +221,19 @@ def _param_line(path: Path, name: str) -> int:
 
 def test_wrong_parameter_type_names_xml_line_and_declaration(tmp_path):
     (tmp_path / "orennayar.rdsl").write_text((EXAMPLES / "orennayar.rdsl").read_text())
-    path = scene(tmp_path, '<bsdf type="orennayar">\n'
-                 '    <rgb name="sigma" value="0.1, 0.2, 0.3"/>\n</bsdf>')
-    with pytest.raises(SceneError) as e:
-        load_scene_description(path)
-    text = str(e.value)
-    assert text.startswith(f"{path}:4:"), text
     decl = f"{tmp_path / 'orennayar.rdsl'}:{_param_line(tmp_path / 'orennayar.rdsl', 'sigma')}"
-    assert "expects a float or a texture, got <rgb>" in text and decl in text
+    # a Float takes a gray <rgb> (Mitsuba's texture forms) but not a varying one
+    for value, expected in (('<boolean name="sigma" value="true"/>',
+                             ("expects a float or a texture (or a constant spectrum or rgb), "
+                             "got <boolean>")),
+                            ('<rgb name="sigma" value="0.1, 0.2, 0.3"/>',
+                             "the <rgb> given varies (0.1, 0.2, 0.3); give one value")):
+        path = scene(tmp_path, f'<bsdf type="orennayar">\n    {value}\n</bsdf>')
+        with pytest.raises(SceneError) as e:
+            load_scene_description(path)
+        text = str(e.value)
+        assert text.startswith(f"{path}:4:"), text
+        assert expected in text and decl in text, text
     assert "`param sigma: Float`" in text
 
 

@@ -298,7 +298,10 @@ class _Builder:
         if p.kind == "vec3":
             return np.asarray(value.rgb if kind == "rgb" else value, dtype=np.float64)
         if p.kind in ("ftex", "fconst"):
-            return float(value) if kind in ("float", "integer") else _constant(value, name, loc)
+            if kind in ("float", "integer"):
+                return float(value)
+            return _constant(value, f"parameter '{name}' of {self.what(node)}", kind,
+                             _declared(name, p), loc)
         if p.kind in ("color", "spectrum"):
             if kind in ("float", "integer"):
                 return Color.gray(value)
@@ -538,14 +541,14 @@ def _declared(name: str, p: Param) -> str:
     return f" (declared `param {name}: {p.rdsl_type}` at {p.decl})" if p.decl else ""
 
 
-def _constant(value: Color, name: str, loc: Loc) -> float:
+def _constant(value: Color, what: str, kind: str, declared: str, loc: Loc) -> float:
     """A ``<spectrum>`` or ``<rgb>`` given for a scalar: the constant it holds.  Mitsuba 3 would
     take a varying one as a texture evaluated per wavelength; rdsl's scalar params cannot."""
     vals = value.values if value.wavelengths is not None else value.rgb
     if max(vals) != min(vals):
-        raise scene_error(f"'{name}' takes a single number here, but the spectrum/rgb given "
-                          f"varies ({', '.join(f'{v:g}' for v in vals)}); give one value",
-                          loc)
+        raise scene_error(f"{what} takes one number (or a texture where Mitsuba does), but the "
+                          f"<{kind}> given varies ({', '.join(f'{v:g}' for v in vals)}); give "
+                          f"one value{declared}", loc)
     return float(vals[0])
 
 
