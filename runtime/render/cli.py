@@ -61,13 +61,13 @@ def render_command(args: Any) -> int:
     build = Build.of(args.target, args.variant)  # a bad name fails before the scene loads
     scene_path = Path(args.scene)
     if not scene_path.is_file():
-        raise CompileError(f"{scene_path}: error: no such scene file")
+        raise CompileError(f"{scene_path}: no such scene file")
     out = Path(args.output) if args.output else Path(scene_path.stem + ".exr")
     if out.suffix.lower() != ".exr":
         out = out.with_suffix(".exr")
     for target in (out, out.with_suffix(".png")):
         if target.resolve() == scene_path.resolve():
-            raise CompileError(f"{target}: error: refusing to overwrite the input scene")
+            raise CompileError(f"{target}: refusing to overwrite the input scene")
     defines = parse_defines(args.defines)
     watching = getattr(args, "watch", False)
     specialize = getattr(args, "specialize", None)
@@ -99,7 +99,7 @@ def render_command(args: Any) -> int:
         out.parent.mkdir(parents=True, exist_ok=True)
         png = write_render(out, img, scene.channel_names)
     except OSError as e:
-        raise CompileError(f"{out}: error: cannot write the image: {e.strerror or e}") from None
+        raise CompileError(f"{out}: cannot write the image: {e.strerror or e}") from None
     h, w = img.shape[:2]
     paths = h * w * spp
     print(summary_line(f"{scene_path.name}: {w}x{h}, {spp} spp", t_render, paths, "paths",

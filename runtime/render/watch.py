@@ -243,7 +243,7 @@ class Watcher:
         try:
             write_render(self.job.out, img, scene.channel_names)
         except OSError as e:
-            raise CompileError(f"{self.job.out}: error: cannot write the image: "
+            raise CompileError(f"{self.job.out}: cannot write the image: "
                                f"{e.strerror or e}") from None
 
 
