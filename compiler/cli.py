@@ -50,7 +50,7 @@ def add_commands(sub: argparse._SubParsersAction) -> dict[str, Command]:
 def _require_file(path: str) -> Path:
     p = Path(path)
     if not p.is_file():
-        raise CompileError(f"{path}: error: no such file")
+        raise CompileError(f"{path}: no such file")
     return p
 
 
@@ -136,7 +136,7 @@ def _compile(args: argparse.Namespace) -> int:
 
 def _refuse_input(out: Path, src: Path) -> None:
     if out.resolve() == src:
-        raise CompileError(f"{out}: error: refusing to overwrite the input file")
+        raise CompileError(f"{out}: refusing to overwrite the input file")
 
 
 def _write(path: Path, data: str | bytes) -> None:
@@ -147,4 +147,4 @@ def _write(path: Path, data: str | bytes) -> None:
         else:
             path.write_text(data)
     except OSError as e:
-        raise CompileError(f"{path}: error: cannot write output: {e.strerror}") from e
+        raise CompileError(f"{path}: cannot write output: {e.strerror}") from e
