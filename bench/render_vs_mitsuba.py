@@ -151,7 +151,7 @@ def main() -> None:
         matplotlib.use("Agg")
         import matplotlib.pyplot as plt
     except ImportError:
-        print("(matplotlib not installed: no plot)")
+        print("(matplotlib is not installed: no plot; pip install -e '.[bench]')")
         return
     fig, ax = plt.subplots(figsize=(6, 4.5))
     for name, rows in curves.items():
