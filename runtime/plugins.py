@@ -100,6 +100,14 @@ class PluginDecl:
         return self._checked
 
 
+def declared_params(plugin: Any) -> list[ParamDecl]:
+    """The ``param``s of a checked plugin (a ``dsl`` checker's plugin), in order."""
+    from ..dsl.types import type_name
+
+    return [ParamDecl(s.name, type_name(s.type), d, s.loc)
+            for s, d in zip(plugin.params, plugin.defaults)]
+
+
 @cache
 def _checked(path: Path, kind: str, name: str, line: int, mtime: int
              ) -> tuple[dict[str, ParamDecl], frozenset[str]]:
@@ -107,14 +115,11 @@ def _checked(path: Path, kind: str, name: str, line: int, mtime: int
     frontend checks (its diagnostics point into the file).  ``mtime`` keys the cache, so an
     edited file is read again."""
     from ..dsl import check
-    from ..dsl.types import type_name
 
     prog = check(path)
     for pl in prog.plugins:
         if pl.name == name and pl.module.key == str(path):
-            params = {s.name: ParamDecl(s.name, type_name(s.type), d, s.loc)
-                      for s, d in zip(pl.params, pl.defaults)}
-            return params, frozenset(pl.fns)
+            return {q.name: q for q in declared_params(pl)}, frozenset(pl.fns)
     raise CompileError(f"`{kind} {name}` seems declared here, but the file declares no such "
                        "plugin (is the line inside a comment?)", Loc(str(path), line, 1))
 

@@ -40,6 +40,7 @@ from ...compiler.ir import Loc
 from ...compiler.passes.specialize import parameter_slots
 from ...core.color import MODELS
 from ...core.scene_spec import Instance, SceneSpec, SpectrumValue
+from ..plugins import ParamDecl, declared_params
 
 STDLIB = Path(__file__).resolve().parents[2] / "stdlib"
 KINDS = ("bsdf", "emitter", "texture")  # the plugin kinds the test kit knows
@@ -104,16 +105,6 @@ SOURCE = _PRELUDE + _BSDF + _WAVELENGTHS
 
 
 @dataclass(frozen=True)
-class Param:
-    """A plugin's ``param``: its source type name, default (None: none) and location."""
-
-    name: str
-    type: str
-    default: Any
-    loc: Loc
-
-
-@dataclass(frozen=True)
 class Declaration:
     """A plugin declared in a file: ``kind NAME { ... }``."""
 
@@ -121,7 +112,7 @@ class Declaration:
     name: str
     path: Path
     line: int
-    params: tuple[Param, ...]
+    params: tuple[ParamDecl, ...]
     methods: tuple[str, ...]
 
     @property
@@ -133,7 +124,6 @@ def declarations(path: str | Path) -> list[Declaration]:
     """The plugins declared in the file ``path`` (not those of its imports), checked by the
     frontend: a syntax or type error is a :class:`CompileError` at its line."""
     from ...dsl import check
-    from ...dsl.types import type_name
 
     path = Path(path)
     program = check(path)
@@ -142,8 +132,7 @@ def declarations(path: str | Path) -> list[Declaration]:
     for pl in program.plugins:
         if pl.module.key != main:
             continue
-        params = tuple(Param(s.name, type_name(s.type), d, s.loc)
-                       for s, d in zip(pl.params, pl.defaults))
+        params = tuple(declared_params(pl))
         out.append(Declaration(pl.kind, pl.name, path, pl.decl.loc.line, params,
                                tuple(pl.fns)))
     return out
