@@ -116,7 +116,8 @@ def test_report_compares_instruction_counts(tmp_path, capsys):
     assert m, text
     spec, generic = int(m[1]), int(m[2])
     assert spec < generic, text
-    assert "parameters: 12 values of 4 instance(s) folded as constants" in text
+    # 3 diffuse colours, the light's radiance and the path integrator's 3 params
+    assert "parameters: 15 values of 5 instance(s) folded as constants" in text
     assert "sampling code for point, spot, directional, constant, envmap folded away" in text
     print(m[0])
 

@@ -144,13 +144,15 @@ def parameter_slots(scene: SceneSpec, model: ColorModel = RGB
 
     # emitter_kinds and shape_kinds stay None: the generic build handles every kind
     spec = SceneSpec(instances("bsdfs"), instances("emitters"), instances("textures"),
-                     instances("bsdf_leaves"))
+                     instances("bsdf_leaves"), integrators=instances("integrators"))
     return spec, np.asarray(values, np.float32)
 
 
 def describe(scene: SceneSpec, placeholders: list[str] | None = None) -> list[str]:
     """One line per placeholder: which instances its dispatch covers."""
     out = []
+    if placeholders is None and scene.integrators:
+        out.append("integrators: " + ", ".join(i.plugin for i in scene.integrators))
     for name in placeholders if placeholders is not None else list(PLACEHOLDERS):
         kind, _ = PLACEHOLDERS[name]
         instances: list[Instance] = getattr(scene, kind)
@@ -182,12 +184,39 @@ class Specialize(Pass):
             kinds = module.functions.get(name)
             if kinds is not None and present is not None:
                 kinds.body = _kind_test(kinds, present)
+        for fn in list(module.functions.values()):
+            self._bind_calls(module, fn, fn.body)
         if self._prm:
             for name, prm in self._prm.items():
                 module.functions[name].params.append(Param(prm, uniform=True))
             _thread_buffer(module, PARAM_BUFFER)
         self.report.extend(describe(self.scene, [n for n in PLACEHOLDERS
                                                  if n in module.functions]))
+
+    def _bind_calls(self, module: Module, fn: Function, block: Block) -> None:
+        """Give each call of a plugin's function from outside the plugin (``path.sample(...)``
+        in the render kernel: a call with a ``bound`` attribute, whose params are the
+        defaults) the params of the scene's instance of that plugin."""
+        out: list[Instr] = []
+        for ins in block.instrs:
+            for region in ins.regions:
+                self._bind_calls(module, fn, region)
+            if ins.op is Op.CALL and "bound" in ins.attrs:
+                n = ins.attrs.pop("bound")
+                callee = module.functions[ins.attrs["callee"]]
+                plugin = callee.attrs.get("plugin", "?")
+                inst = next((i for i in self.scene.integrators if i.plugin == plugin),
+                            Instance(plugin))
+                pre = Builder(Block(), ins.loc)
+                ident = pre.const(0, I32)
+                defaults = {p.value.name: p.default for p in callee.params}
+                ins.operands[n:] = [
+                    self._param_value(pre, p, ident, [inst], [0], defaults.get(p.value.name),
+                                      module, fn, {})
+                    for p in callee.params[n:]]
+                out += pre.block.instrs
+            out.append(ins)
+        block.instrs = out
 
     def _dispatch(self, module: Module, placeholder: Function, instances: list[Instance],
                   method: str) -> None:

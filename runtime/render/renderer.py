@@ -39,7 +39,7 @@ from .declared import declared_instance
 from .emitters import KINDS as EMITTER_KINDS
 from .emitters import EmitterTables, emitter_tables
 from .film import develop, film_uniforms, new_accumulator
-from .integrators import integrator_plan
+from .integrators import integrator_instances, integrator_plan
 from .kernel_source import kernel_source, scene_plugins
 from .progress import Progress
 from .shapes import FLAGS as SHAPE_FLAGS
@@ -277,7 +277,8 @@ class Scene:
         bsdfs, leaves = split_leaves(self.bsdfs)  # combinators reach leaves by id
         kinds = tuple(sorted({int(k) for k in self.buffers.lights.EK[0::4]}))
         shapes = tuple(sorted({_shape_kind(int(g)) for g in self.buffers.G[3::4]}))
-        scene = SceneSpec(bsdfs, self.emitters, self.buffers.textures, leaves, kinds, shapes)
+        scene = SceneSpec(bsdfs, self.emitters, self.buffers.textures, leaves, kinds, shapes,
+                          integrator_instances(self.desc.integrator))
         # the report is derived from the scene, so a cache hit can print it too
         self.report = describe(scene) + self._folding(scene)
         self.kernel_src, self.scene_spec = src, scene
@@ -297,7 +298,7 @@ class Scene:
         """What the build folds (specialized) or reads at run time (generic), for the report."""
         _, values = parameter_slots(scene, self.build.model)
         n = sum(1 for i in [*scene.bsdfs, *scene.bsdf_leaves, *scene.textures,
-                            *scene.emitters] if i.params)
+                            *scene.emitters, *scene.integrators] if i.params)
         kinds = {v: k for k, v in EMITTER_KINDS.items()}
         have = [kinds[k] for k in scene.emitter_kinds or ()]
         lacks = ", ".join(k for k in EMITTER_KINDS if k not in have) or "no other kind"
