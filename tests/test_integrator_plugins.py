@@ -228,3 +228,19 @@ def test_test_plugin_passes_ao_and_catches_a_nan(tmp_path, capsys):
     (tmp_path / "mine.rdsl").write_text(textwrap.dedent(bad))
     assert main(["test-plugin", str(tmp_path / "mine.rdsl")]) == 1
     assert "NaN or infinite samples" in capsys.readouterr().out
+
+
+def test_two_channel_film_in_mono(tmp_path):
+    """mono + one Float AOV is a film of two channels (a layout the film once mixed up with
+    its weight column)."""
+    plugin = AOV_PLUGIN.replace("struct Extra { hit: Float, n: Vec3, tint: Spectrum }",
+                                "struct Extra { hit: Float }") \
+        .replace(", n: Vec3(0.0), tint: Spectrum(0.0)", "").replace(", n: it.ng, tint: tint", "")
+    (tmp_path / "extras.rdsl").write_text(plugin)
+    path = write_scene(tmp_path, '<integrator type="extras"/>' + FLOOR
+                       + _camera("5, 0, 3", "5, 0, 0", 40, 8, 8, 2))
+    scene = rdsl.load_scene(path, variant="mono")
+    img = scene.render()
+    assert scene.channel_names == ["Y", "hit"]
+    np.testing.assert_allclose(img[..., 1], 1.0, atol=1e-6)
+    assert 2.99 - 1e-3 < img[..., 0].min() and img[..., 0].max() < 2.99 * 1.13

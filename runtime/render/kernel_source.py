@@ -170,9 +170,12 @@ def _film_holes(film: dict[str, Any]) -> dict[str, str]:
 
 
 def kernel_source(desc: Any, bufs: SceneBuffers, bsdfs: list[Instance],
-                  emitters: list[Instance], model: ColorModel = RGB) -> str:
+                  emitters: list[Instance], model: ColorModel = RGB,
+                  derivative: bool = False) -> str:
     """The scene's render kernel in rdsl: constants of this scene, stdlib code for the rest.
-    A spectral kernel samples its wavelengths first and gives the film linear sRGB."""
+    A spectral kernel samples its wavelengths first and gives the film linear sRGB.
+    ``derivative``: the film also gets the derivative of the radiance (``derivative(x)``,
+    along the parameter tangent of a forward-mode build), as channels after the AOVs."""
     spectral, channels = model.spectral, model.channels
     # a polarized L is a Mueller matrix: the film records the intensity (entry [0][0], the
     # first Stokes component for the unpolarized emitters), as Mitsuba's film does
@@ -181,16 +184,21 @@ def kernel_source(desc: Any, bufs: SceneBuffers, bsdfs: list[Instance],
     plan.check_variant(model)
     plugins, _ = scene_plugins(desc, bsdfs, emitters, bufs.textures)
     aov_fields = _aov_fields(plan, channels, spectral)
-    film = film_uniforms(desc.sensor.film, 1, channels=channels + len(plan.aov_channel_names()))
+    value_type = "Vec3" if spectral else "Unpolarized" if mono_pol else "Spectrum"
+    value = ("to_srgb(L * wavelength_weight)" if spectral else "unpolarized(L)"
+             if mono_pol else "L")
+    if derivative:
+        aov_fields.append((value_type, f"derivative({value})"))
+    film = film_uniforms(desc.sensor.film, 1, channels=channels * (1 + derivative)
+                         + len(plan.aov_channel_names()))
     seed_rng = (["    let (rng, u_wavelength) = next_1d(pcg32_seed(UInt64(seed), stream));",
                  "    let wavelength_weight = sample_wavelengths(u_wavelength);"] if spectral
                 else ["    let rng = pcg32_seed(UInt64(seed), stream);"])
     return fill({
         "scene_name": Path(desc.path).name,
         "imports": "\n".join(_imports(spectral, plugins)),
-        "value_type": "Vec3" if spectral else "Unpolarized" if mono_pol else "Spectrum",
-        "value": ("to_srgb(L * wavelength_weight)" if spectral else "unpolarized(L)"
-                  if mono_pol else "L"),
+        "value_type": value_type,
+        "value": value,
         "aov_fields": "".join(f"aov{k}: {t}, " for k, (t, _) in enumerate(aov_fields)),
         "aov_values": "".join(f"aov{k}: {e} * k, " for k, (_, e) in enumerate(aov_fields)),
         "camera": literal(camera_uniforms(desc.sensor), "Camera"),
