@@ -92,10 +92,10 @@ def main() -> None:
     base = statistics.median(times["diffuse (stdlib)"])
     print(f"Cornell box {args.res}x{args.res}, {args.spp} spp, {args.threads} threads, "
           f"median of {args.repeat} alternating runs")
-    print(f"{'BSDF of the three colours':28s} {'seconds':>8s} {'vs diffuse':>10s}")
+    print(f"{'case (BSDF of the colours, integrator)':36s} {'seconds':>8s} {'vs diffuse':>10s}")
     for name, ts in times.items():
         m = statistics.median(ts)
-        print(f"{name:28s} {m:8.3f} {m / base:10.3f}")
+        print(f"{name:36s} {m:8.3f} {m / base:10.3f}")
 
 
 if __name__ == "__main__":
