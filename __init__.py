@@ -23,6 +23,10 @@ def __getattr__(name: str):
         from .compiler.build import Build
 
         return Build
+    if name == "optim":
+        from .runtime import optim
+
+        return optim
     if name == "register_plugin":
         from .runtime import plugins
 

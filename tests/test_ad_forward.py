@@ -129,3 +129,32 @@ def test_assigning_a_parameter_renders_without_compiling_again():
     assert scene.compile() is compiled  # one generic kernel served both values
     np.testing.assert_allclose(doubled, 2 * before, rtol=1e-5, atol=1e-6)
     np.testing.assert_allclose(again, before, rtol=1e-6, atol=1e-7)
+
+
+def test_adam_steps_towards_the_minimum():
+    opt = rdsl.optim.Adam(lr=0.1)
+    opt["x"] = [3.0, -2.0]
+    for _ in range(200):
+        opt.step({"x": 2 * (opt["x"] - np.float32([1.0, 0.5]))})
+    np.testing.assert_allclose(opt["x"], [1.0, 0.5], atol=0.02)
+    with pytest.raises(KeyError, match="no gradient for `x`"):
+        opt.step({})
+    with pytest.raises(ValueError, match="learning rate"):
+        rdsl.optim.Adam(lr=0.0)
+
+
+@needs_cbox
+def test_albedo_example_recovers_the_walls():
+    """examples/inverse/albedo.py at a small size: the recovered albedos are within 4% of the
+    truth (vector norm; the dominant components within 3%) from a grey start."""
+    import importlib.util
+
+    path = Path(__file__).resolve().parents[1] / "examples" / "inverse" / "albedo.py"
+    spec = importlib.util.spec_from_file_location("albedo_example", path)
+    example = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(example)
+    r = example.recover(res=32, spp=32, iterations=80, log=lambda line: None)
+    for wall, channel in (("red.reflectance", 0), ("green.reflectance", 1)):
+        got, truth = r[wall], r[f"truth.{wall}"]
+        assert np.linalg.norm(got - truth) / np.linalg.norm(truth) < 0.04, (wall, got, truth)
+        assert abs(got[channel] - truth[channel]) / truth[channel] < 0.03, (wall, got, truth)

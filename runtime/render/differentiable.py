@@ -36,7 +36,7 @@ from ...core.scene_spec import SceneSpec, Slot
 if TYPE_CHECKING:
     from .renderer import Scene
 
-__all__ = ["SceneParams", "param_slots", "render_forward"]
+__all__ = ["SceneParams", "gradient", "param_slots", "render_forward"]
 
 KINDS = ("bsdfs", "bsdf_leaves", "emitters", "textures", "integrators")
 
@@ -136,3 +136,26 @@ def render_forward(scene: Scene, name: str, spp: int | None = None, seed: int | 
     img = twin.render(spp=spp, seed=seed, threads=threads)
     c = 1 if scene.build.model.mono else 3  # the derivative's channels come last
     return img[..., :-c], img[..., -c:]
+
+
+def gradient(scene: Scene, names: list[str], loss_grad: np.ndarray, spp: int | None = None,
+             seed: int | None = None) -> dict[str, np.ndarray]:
+    """The gradient of a loss with respect to parameters ``names``, given the loss's
+    gradient with respect to the image (``loss_grad``, shaped like ``render()``'s colour
+    channels): by forward mode, one derivative render per parameter component, each
+    contracted with ``loss_grad``.  Exact for few parameters (colours, a roughness); reverse
+    mode, which costs one render for all of them, is not written yet."""
+    out: dict[str, np.ndarray] = {}
+    for name in names:
+        _, slot = _lookup(scene.params.slots, name)
+        g = np.zeros(slot.size, np.float64)
+        for k in range(slot.size):
+            tangent = np.zeros(slot.size, np.float32)
+            tangent[k] = 1.0
+            _, d_img = render_forward(scene, name, spp, seed, tangent)
+            if d_img.shape != np.shape(loss_grad):
+                raise ValueError(f"the loss gradient has shape {np.shape(loss_grad)}; the "
+                                 f"image's colour channels are {d_img.shape}")
+            g[k] = float(np.sum(d_img.astype(np.float64) * loss_grad))
+        out[name] = g.astype(np.float32)
+    return out

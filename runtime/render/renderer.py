@@ -37,7 +37,7 @@ from .bsdfs import (
 )
 from .colors import spectrum_value
 from .declared import declared_instance
-from .differentiable import SceneParams, render_forward
+from .differentiable import SceneParams, gradient, render_forward
 from .emitters import KINDS as EMITTER_KINDS
 from .emitters import EmitterTables, emitter_tables
 from .film import develop, film_uniforms, new_accumulator
@@ -330,6 +330,12 @@ class Scene:
         """The image and its derivative with respect to parameter ``name`` (forward-mode
         AD along ``tangent``): runtime/render/differentiable.py."""
         return render_forward(self, name, spp, seed, tangent, threads)
+
+    def gradient(self, names: list[str], loss_grad: np.ndarray, spp: int | None = None,
+                 seed: int | None = None) -> dict[str, np.ndarray]:
+        """d loss / d parameter for ``names``, from d loss / d image (forward mode, one
+        render per parameter component): runtime/render/differentiable.py."""
+        return gradient(self, names, loss_grad, spp, seed)
 
     def _folding(self, scene: SceneSpec) -> list[str]:
         """What the build folds (specialized) or reads at run time (generic), for the report."""
