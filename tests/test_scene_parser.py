@@ -119,7 +119,7 @@ BAD_SCENES = {
                         "bsdf 'blendbsdf' is missing the required parameter 'weight'"),
     "bad_material": (['<bsdf type="conductor" id="c">',
                       '    <string name="material" value="Unobtainium"/>', '</bsdf>'], 3,
-                     "conductor material 'Unobtainium' is unknown; accepted: Ag, Al, Au, Cr, Cu"),
+                     "conductor material 'Unobtainium' is unknown; accepted: Ag, Al, AlAs, AlAs_palik"),
     "bad_distribution": (['<bsdf type="roughconductor" id="c">',
                           '    <string name="distribution" value="phong"/>', '</bsdf>'], 3,
                          "is 'phong'; accepted: beckmann, ggx"),
