@@ -152,6 +152,8 @@ _SPECS = [
                                      "transmittance": P("color", 1.0),
                                      "polarizing": P("boolean", True)}),
     PluginSpec("bsdf", "retarder", {"theta": P("fconst", 0.0), "delta": P("fconst", 90.0)}),
+    # a pass-through (Mitsuba's null.cpp): light goes straight on, as mask's share
+    PluginSpec("bsdf", "null", {}),
     PluginSpec("bsdf", "twosided", {}, {"bsdf": (1, 2)}),
     PluginSpec("bsdf", "mask", {"opacity": P("ftex", 0.5)}, {"bsdf": (1, 1)}),
     PluginSpec("bsdf", "blendbsdf", {"weight": P("ftex", REQUIRED)}, {"bsdf": (2, 2)}),
