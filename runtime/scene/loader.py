@@ -32,6 +32,7 @@ from .analytic import Analytic
 from .camera import fov_x
 from .errors import scene_error
 from .meshes import Mesh, MeshError
+from .principled import resolve_principled
 from .reads import memoized
 from .schema import (
     AOV_TYPES,
@@ -385,6 +386,9 @@ class _Builder:
         obj.children = [b for b, _ in objects.get("bsdf", [])]
         if obj.decl is not None:  # a user plugin: its params are its own, not Mitsuba's
             return
+        if obj.type == "principled":
+            resolve_principled(p, lambda k: _loc(node, k) is not node.loc, self.what(node),
+                               lambda k: _loc(node, k))
         if "material" in p:
             given = [k for k in ("eta", "k") if p[k] is not None]
             if given and "material" in node.props:

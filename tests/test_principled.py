@@ -1,0 +1,179 @@
+"""The `principled` BSDF (stdlib/bsdf/principled.rdsl, Mitsuba 3's principled.cpp) against
+Mitsuba 3 itself: eval() and pdf() of scenes' principled BSDFs (parameters as Mitsuba takes
+them, `specular` and `eta` included) at directions over the whole sphere, in scalar_rgb and
+scalar_spectral; sample() against pdf() by the test kit's chi-square (and its other checks)
+for lobe mixes that exercise every lobe, in every variant; and the loader's errors."""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+from _bsdf_harness import SceneBsdfs
+from rdsl.compiler.diagnostics import CompileError
+from rdsl.runtime.scene.loader import load_scene_description
+
+f32 = np.float32
+ROOT = Path(__file__).resolve().parents[1]
+CASES: list[dict[str, Any]] = [
+    {},  # Mitsuba's defaults: base_color 0.5, roughness 0.5, specular 0.5
+    {"base_color": (0.8, 0.3, 0.1), "metallic": 0.7, "roughness": 0.3, "spec_tint": 0.4},
+    {"base_color": (0.2, 0.6, 0.9), "spec_trans": 0.8, "eta": 1.33, "roughness": 0.25},
+    {"base_color": (0.9, 0.8, 0.3), "sheen": 0.8, "sheen_tint": 0.6, "flatness": 0.5,
+     "clearcoat": 0.7, "clearcoat_gloss": 0.4, "roughness": 0.6},
+    {"base_color": (0.5, 0.9, 0.4), "anisotropic": 0.6, "roughness": 0.4, "metallic": 0.3,
+     "specular": 0.8, "spec_trans": 0.4, "clearcoat": 0.5,
+     "main_specular_sampling_rate": 2.0, "diffuse_reflectance_sampling_rate": 0.5,
+     "clearcoat_sampling_rate": 0.3},
+]
+MIXES = [  # the test kit's -p options: lobe mixes for sample() vs pdf()
+    [],
+    ["spec_trans=0.6", "clearcoat=0.8", "roughness=0.3", "anisotropic=0.5", "metallic=0.2",
+     "sheen=0.5", "spec_tint=0.3", "sheen_tint=0.5", "flatness=0.4", "base_color=0.8,0.5,0.2"],
+    ["spec_trans=1.0", "roughness=0.15", "eta=1.6"],
+]
+
+
+def _xml_value(name: str, value: Any) -> str:
+    if isinstance(value, tuple):
+        return f'<rgb name="{name}" value="{", ".join(map(str, value))}"/>'
+    return f'<float name="{name}" value="{value}"/>'
+
+
+def _scene(tmp_path: Path, cases: list[dict[str, Any]]) -> Path:
+    shapes = "".join('<shape type="sphere"><bsdf type="principled">'
+                     + "".join(_xml_value(k, v) for k, v in case.items())
+                     + "</bsdf></shape>" for case in cases)
+    path = tmp_path / "principled.xml"
+    path.write_text(f'<scene version="3.0.0">{shapes}</scene>')
+    return path
+
+
+def _mi_dict(case: dict[str, Any]) -> dict[str, Any]:
+    out: dict[str, Any] = {"type": "principled"}
+    for k, v in case.items():
+        out[k] = {"type": "rgb", "value": list(v)} if isinstance(v, tuple) else v
+    return out
+
+
+@pytest.fixture(params=["rgb", "spectral"])
+def variant(request) -> Iterator[tuple[str, Any]]:
+    mi = pytest.importorskip("mitsuba", reason="the mitsuba package is not installed")
+    previous = mi.variant()
+    try:
+        mi.set_variant(f"scalar_{request.param}")
+    except Exception as e:  # noqa: BLE001 - a build without it
+        pytest.skip(f"mitsuba scalar_{request.param} unavailable: {e}")
+    yield request.param, mi
+    if previous is not None:
+        mi.set_variant(previous)
+
+
+def _sphere(n: int, seed: int) -> np.ndarray:
+    """n directions uniform on the sphere, none within 1e-3 of the horizon."""
+    rng = np.random.default_rng(seed)
+    v = rng.normal(size=(4 * n, 3))
+    v /= np.linalg.norm(v, axis=1, keepdims=True)
+    return v[np.abs(v[:, 2]) > 1e-3][:n].astype(f32)
+
+
+def _surfaces(wi: np.ndarray) -> dict:
+    n = len(wi)
+    z = np.tile(np.array([0, 0, 1], f32), (n, 1))
+    return {"p": np.zeros((n, 3), f32), "n": z, "sh_n": z, "uv": np.zeros((n, 2), f32),
+            "wi": np.ascontiguousarray(wi, f32), "t": np.ones(n, f32), "valid": np.ones(n, bool)}
+
+
+def _mitsuba(mi: Any, bsdf: Any, wi: np.ndarray, wo: np.ndarray,
+             lam: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
+    ctx = mi.BSDFContext()
+    values, pdfs = [], []
+    for j in range(len(wi)):
+        si = mi.SurfaceInteraction3f()
+        si.p, si.n, si.sh_frame = [0, 0, 0], [0, 0, 1], mi.Frame3f([0, 0, 1])
+        si.wi = [float(x) for x in wi[j]]
+        if lam is not None:
+            si.wavelengths = [float(x) for x in lam[j]]
+        d = [float(x) for x in wo[j]]
+        values.append(np.array(bsdf.eval(ctx, si, d), np.float64).ravel())
+        pdfs.append(float(bsdf.pdf(ctx, si, d)))
+    return np.array(values), np.array(pdfs)
+
+
+def test_eval_and_pdf_match_mitsuba(tmp_path, variant):
+    """At 400 (wi, wo) pairs over the sphere (reflection and transmission, from above and
+    below; half of them near the specular directions, where the lobes peak) per case."""
+    name, mi = variant
+    bsdfs = SceneBsdfs(_scene(tmp_path, CASES), name)
+    n = 400
+    wi = _sphere(n, 3)
+    wo = _sphere(n, 4)
+    mirror = np.stack([-wi[:, 0], -wi[:, 1], wi[:, 2]], -1) + 0.15 * _sphere(n, 5)
+    wo[: n // 2] = (mirror / np.linalg.norm(mirror, axis=1, keepdims=True))[: n // 2]
+    for k, case in enumerate(CASES):
+        h = bsdfs[k]
+        lam = h.wavelengths(n)
+        ours_f = np.asarray(h.eval(_surfaces(wi), wo), np.float64).reshape(n, -1)
+        ours_p = np.asarray(h.pdf(_surfaces(wi), wo), np.float64)
+        theirs_f, theirs_p = _mitsuba(mi, mi.load_dict(_mi_dict(case)), wi, wo, lam)
+        assert ours_f.shape == theirs_f.shape
+        assert (theirs_f > 0).any() and (theirs_p > 0).mean() > 0.3, case
+        np.testing.assert_allclose(ours_f, theirs_f, rtol=5e-4, atol=1e-5 * theirs_f.max(),
+                                   err_msg=f"eval {case} ({name})")
+        np.testing.assert_allclose(ours_p, theirs_p, rtol=5e-4, atol=1e-5 * theirs_p.max(),
+                                   err_msg=f"pdf {case} ({name})")
+
+
+# every mix in rgb; the one with every lobe in the other variants
+KIT_RUNS = [("rgb", m) for m in range(len(MIXES))] + [
+    (v, 1) for v in ("mono", "spectral", "mono_polarized", "spectral_polarized")]
+
+
+@pytest.mark.parametrize("variant,mix", KIT_RUNS, ids=[f"{v}-{m}" for v, m in KIT_RUNS])
+def test_principled_passes_the_test_kit(capsys, variant: str, mix: int):
+    """`rdsl test-plugin stdlib/bsdf/principled.rdsl -p ...`: chi-square of sample() against
+    pdf() (from above, and from below where it transmits), weight == eval / pdf, pdf ==
+    pdf(), the albedo at most 1, finite values at grazing angles and extreme parameters."""
+    from rdsl.cli import main
+
+    args = [a for p in MIXES[mix] for a in ("-p", p)]
+    rc = main(["test-plugin", str(ROOT / "stdlib" / "bsdf" / "principled.rdsl"), *args,
+               "--variant", variant, "--samples", "100000"])
+    out = capsys.readouterr().out
+    assert rc == 0 and " FAIL" not in out, out
+    assert out.count("chi2 sample vs pdf") >= 3 and "weight == eval/pdf" in out, out
+
+
+@pytest.mark.parametrize("body,line,message", [
+    ('<float name="eta" value="1.4"/><float name="specular" value="0.3"/>', 5,
+     "give either 'eta' or 'specular', not both"),
+    ('<float name="specular" value="20"/>', 4, "'specular' = 20 gives no valid index"),
+    ('<float name="metalic" value="0.5"/>', 4, "unknown parameter 'metalic' of bsdf "
+     "'principled'"),
+    ('<string name="roughness" value="0.5"/>', 4, "parameter 'roughness' of bsdf 'principled' "
+     "expects a float or a texture"),
+])
+def test_bad_parameters_are_errors_at_their_line(tmp_path, body, line, message):
+    path = tmp_path / "bad.xml"
+    path.write_text('<scene version="3.0.0">\n<shape type="sphere">\n'
+                    '<bsdf type="principled">\n' + body.replace("/><", "/>\n<")
+                    + '\n</bsdf></shape></scene>')
+    with pytest.raises(CompileError) as e:
+        load_scene_description(path)
+    assert f"{path}:{line}:" in str(e.value) and message in str(e.value), str(e.value)
+
+
+def test_specular_sets_eta_as_mitsuba(tmp_path, variant):
+    """`specular` s is eta = 2 / (1 - sqrt(0.08 s)) - 1, nudged off 1 with transmission."""
+    _, mi = variant
+    for params in ({"specular": 0.8}, {"specular": 0.0, "spec_trans": 0.5},
+                   {"eta": 1.0, "spec_trans": 0.5}, {"eta": 1.7}):
+        path = _scene(tmp_path, [params])
+        ours = load_scene_description(path).shapes[0].bsdf.params["eta"]
+        p = mi.traverse(mi.load_dict(_mi_dict(params)))
+        theirs = float(p["eta"]) if "eta" in params else \
+            2.0 / (1.0 - np.sqrt(0.08 * float(p["specular"]))) - 1.0
+        assert ours == pytest.approx(theirs, rel=1e-6), params
