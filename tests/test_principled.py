@@ -12,7 +12,9 @@ from typing import Any
 
 import numpy as np
 import pytest
+import rdsl
 from _bsdf_harness import SceneBsdfs
+from _mitsuba_render import block_error, render_both
 from rdsl.compiler.diagnostics import CompileError
 from rdsl.runtime.scene.loader import load_scene_description
 
@@ -177,3 +179,67 @@ def test_specular_sets_eta_as_mitsuba(tmp_path, variant):
         theirs = float(p["eta"]) if "eta" in params else \
             2.0 / (1.0 - np.sqrt(0.08 * float(p["specular"]))) - 1.0
         assert ours == pytest.approx(theirs, rel=1e-6), params
+
+
+RENDER = """<scene version="3.0.0">
+  <integrator type="path"><integer name="max_depth" value="8"/></integrator>
+  <sensor type="perspective">
+    <float name="fov" value="40"/>
+    <transform name="to_world"><lookat origin="0, -4, 2" target="0, 0, 0.45" up="0, 0, 1"/>
+    </transform>
+    <film type="hdrfilm"><integer name="width" value="24"/>
+      <integer name="height" value="24"/></film>
+  </sensor>
+  <emitter type="constant"><rgb name="radiance" value="0.9, 1.0, 1.1"/></emitter>
+  <shape type="rectangle">
+    <transform name="to_world"><scale value="3"/></transform>
+    <bsdf type="principled">
+      <texture type="checkerboard" name="base_color">
+        <rgb name="color0" value="0.8, 0.7, 0.2"/><rgb name="color1" value="0.1, 0.3, 0.6"/>
+        <transform name="to_uv"><scale value="4"/></transform>
+      </texture>
+      <texture type="bitmap" name="roughness">
+        <string name="filename" value="roughness.exr"/><boolean name="raw" value="true"/>
+        <transform name="to_uv"><scale value="2"/></transform>
+      </texture>
+      <float name="metallic" value="0.4"/><float name="clearcoat" value="0.5"/>
+      <float name="sheen" value="0.5"/><float name="spec_tint" value="0.3"/>
+    </bsdf>
+  </shape>
+  <shape type="sphere">
+    <point name="center" x="-0.6" y="0" z="0.5"/><float name="radius" value="0.5"/>
+    <bsdf type="principled">
+      <rgb name="base_color" value="0.9, 0.5, 0.4"/><float name="spec_trans" value="0.9"/>
+      <float name="roughness" value="0.2"/><float name="eta" value="1.45"/>
+    </bsdf>
+  </shape>
+  <shape type="sphere">
+    <point name="center" x="0.7" y="0.2" z="0.45"/><float name="radius" value="0.45"/>
+    <bsdf type="principled">
+      <rgb name="base_color" value="0.3, 0.6, 0.9"/><float name="anisotropic" value="0.7"/>
+      <float name="roughness" value="0.4"/><float name="flatness" value="0.6"/>
+      <float name="sheen" value="1.0"/><float name="sheen_tint" value="0.8"/>
+    </bsdf>
+  </shape>
+</scene>
+"""
+
+
+@pytest.mark.parametrize("variant", ["rgb", "spectral"])
+def test_render_matches_mitsuba(tmp_path, variant):
+    """A floor whose base colour and roughness are textures, a glass-like and a sheeny
+    sphere under a constant sky, rendered by rdsl and by Mitsuba 3 (path, 1024 spp,
+    24 x 24).  (No area light: a `diffuse` floor under a rectangle light already differs
+    from Mitsuba by ~1% with interreflections, whatever the BSDFs; see the branch's report.)"""
+    path = tmp_path / "principled_render.xml"
+    path.write_text(RENDER)
+    # (a bitmap, not a checkerboard: Mitsuba 3's checkerboard gives eval_1 its colours swapped)
+    rough = np.array([[0.15, 0.7, 0.4, 0.25], [0.6, 0.2, 0.9, 0.35],
+                      [0.3, 0.5, 0.1, 0.8], [0.45, 0.05, 0.65, 0.3]], np.float32)
+    rdsl.write_image(tmp_path / "roughness.exr", np.repeat(rough[:, :, None], 3, axis=2))
+    img, ref = render_both(path, variant, 1024)
+    assert ref.mean() > 0.05
+    # measured: means within 0.15%, blocks within 1.2%
+    np.testing.assert_allclose(img.mean(axis=(0, 1)), ref.mean(axis=(0, 1)), rtol=0.01)
+    err = block_error(img, ref)
+    assert err < 0.04, err

@@ -1,0 +1,39 @@
+"""A scene file rendered by rdsl and by Mitsuba 3 (a scalar variant, skipped where the
+`mitsuba` package or the variant is missing), for the noise-aware comparisons of
+tests/test_null_bsdf.py and tests/test_principled.py."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+
+def render_both(path: Path, variant: str, spp: int) -> tuple[np.ndarray, np.ndarray]:
+    """(rdsl's image, Mitsuba's) of the scene file ``path``, RGB, different seeds."""
+    pytest.importorskip("rdsl.runtime.embree")
+    mi = pytest.importorskip("mitsuba", reason="the mitsuba package is not installed")
+    previous = mi.variant()
+    try:
+        mi.set_variant(f"scalar_{variant}")
+    except Exception as e:  # noqa: BLE001 - a build without it
+        pytest.skip(f"mitsuba scalar_{variant} unavailable: {e}")
+    try:
+        theirs = np.array(mi.render(mi.load_file(str(path)), spp=spp, seed=1))[..., :3]
+    finally:
+        if previous:
+            mi.set_variant(previous)
+    from rdsl.runtime.render.renderer import load_scene
+
+    ours = load_scene(path, variant=variant, target="host").render(spp=spp, seed=2)[..., :3]
+    return np.asarray(ours, np.float64), theirs.astype(np.float64)
+
+
+def block_error(ours: np.ndarray, theirs: np.ndarray, b: int = 6) -> float:
+    """The largest difference of b x b block means, relative to Mitsuba's (plus 0.05, so
+    that dark blocks are judged in absolute terms)."""
+    def blocks(img: np.ndarray) -> np.ndarray:
+        h, w, c = img.shape
+        return img.reshape(h // b, b, w // b, b, c).mean(axis=(1, 3))
+    return float((np.abs(blocks(ours) - blocks(theirs)) / (0.05 + blocks(theirs))).max())
