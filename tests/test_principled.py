@@ -153,10 +153,10 @@ def test_principled_passes_the_test_kit(capsys, variant: str, mix: int):
     ('<float name="eta" value="1.4"/><float name="specular" value="0.3"/>', 5,
      "give either 'eta' or 'specular', not both"),
     ('<float name="specular" value="20"/>', 4, "'specular' = 20 gives no valid index"),
-    ('<float name="metalic" value="0.5"/>', 4, "unknown parameter 'metalic' of bsdf "
-     "'principled'"),
-    ('<string name="roughness" value="0.5"/>', 4, "parameter 'roughness' of bsdf 'principled' "
-     "expects a float or a texture"),
+    ('<float name="metalic" value="0.5"/>', 4,
+     "unknown parameter 'metalic' of bsdf 'principled'"),
+    ('<string name="roughness" value="0.5"/>', 4,
+     "parameter 'roughness' of bsdf 'principled' expects a float or a texture"),
 ])
 def test_bad_parameters_are_errors_at_their_line(tmp_path, body, line, message):
     path = tmp_path / "bad.xml"
