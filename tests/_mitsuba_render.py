@@ -1,29 +1,41 @@
 """A scene file rendered by rdsl and by Mitsuba 3 (a scalar variant, skipped where the
 `mitsuba` package or the variant is missing), for the noise-aware comparisons of
-tests/test_null_bsdf.py and tests/test_principled.py."""
+tests/test_null_bsdf.py and tests/test_principled.py; :func:`mitsuba_variant` for the
+tests that call Mitsuba's plugins directly."""
 
 from __future__ import annotations
 
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
 
 
-def render_both(path: Path, variant: str, spp: int) -> tuple[np.ndarray, np.ndarray]:
-    """(rdsl's image, Mitsuba's) of the scene file ``path``, RGB, different seeds."""
-    pytest.importorskip("rdsl.runtime.embree")
+@contextmanager
+def mitsuba_variant(variant: str) -> Iterator[Any]:
+    """The `mitsuba` module set to ``variant`` (a test skips without it), and the previous
+    variant restored afterwards."""
     mi = pytest.importorskip("mitsuba", reason="the mitsuba package is not installed")
     previous = mi.variant()
     try:
-        mi.set_variant(f"scalar_{variant}")
+        mi.set_variant(variant)
     except Exception as e:  # noqa: BLE001 - a build without it
-        pytest.skip(f"mitsuba scalar_{variant} unavailable: {e}")
+        pytest.skip(f"mitsuba variant {variant} unavailable: {e}")
     try:
-        theirs = np.array(mi.render(mi.load_file(str(path)), spp=spp, seed=1))[..., :3]
+        yield mi
     finally:
         if previous:
             mi.set_variant(previous)
+
+
+def render_both(path: Path, variant: str, spp: int) -> tuple[np.ndarray, np.ndarray]:
+    """(rdsl's image, Mitsuba's) of the scene file ``path``, RGB, different seeds."""
+    pytest.importorskip("rdsl.runtime.embree")
+    with mitsuba_variant(f"scalar_{variant}") as mi:
+        theirs = np.array(mi.render(mi.load_file(str(path)), spp=spp, seed=1))[..., :3]
     from rdsl.runtime.render.renderer import load_scene
 
     ours = load_scene(path, variant=variant, target="host").render(spp=spp, seed=2)[..., :3]

@@ -13,6 +13,7 @@ from typing import Any
 import numpy as np
 import pytest
 from _bsdf_harness import SceneBsdfs
+from _mitsuba_render import mitsuba_variant
 from rdsl.compiler.diagnostics import CompileError
 from rdsl.runtime.scene.loader import load_scene_description
 from rdsl.runtime.scene.spectra import conductor_materials
@@ -24,21 +25,9 @@ MATERIALS = ["W", "a-C", "Cr", "TiN", "Hg", "Au", "AlSb", "Li", "Cu2O_palik", "n
 ROUGH = {"alpha": 0.3, "distribution": "ggx"}
 
 
-def _mitsuba(variant: str) -> Iterator[Any]:
-    mi = pytest.importorskip("mitsuba", reason="the mitsuba package is not installed")
-    previous = mi.variant()
-    try:
-        mi.set_variant(variant)
-    except Exception as e:  # noqa: BLE001 - a build without it
-        pytest.skip(f"mitsuba variant {variant} unavailable: {e}")
-    yield mi
-    if previous is not None:
-        mi.set_variant(previous)
-
-
 @pytest.fixture(params=["rgb", "spectral"])
 def variant(request) -> Iterator[tuple[str, Any]]:
-    for mi in _mitsuba(f"scalar_{request.param}"):
+    with mitsuba_variant(f"scalar_{request.param}") as mi:
         yield request.param, mi
 
 
@@ -131,3 +120,23 @@ def test_named_conductors_match_mitsuba(tmp_path, variant):
             assert ours.shape == theirs.shape
             np.testing.assert_allclose(ours, theirs, rtol=2e-4, atol=2e-5 * theirs.max(),
                                        err_msg=f"{material} ({name})")
+
+
+def test_committed_tables_are_the_generators_output(tmp_path):
+    """stdlib/data/ior is what tools/gen_conductor_ior.py makes of Mitsuba's data/ior, so the
+    data cannot drift from its documented source; a malformed source row is refused."""
+    from rdsl.tools import gen_conductor_ior as gen
+
+    pytest.importorskip("mitsuba", reason="the mitsuba package is not installed")
+    names = gen.generate(gen.default_source(), tmp_path / "out")
+    assert len(names) >= 40 and "W" in names and "a-C" in names
+    committed = {p.name for p in gen.OUT.glob("*.spd")}
+    assert committed == {p.name for p in (tmp_path / "out").glob("*.spd")}
+    for name in committed:
+        assert (gen.OUT / name).read_text() == (tmp_path / "out" / name).read_text(), name
+    bad = tmp_path / "bad"
+    bad.mkdir()
+    (bad / "X.eta.spd").write_text("# header\n400 1.0\n390 1.1\n")
+    (bad / "X.k.spd").write_text("400 1.0\n500 1.1\n")
+    with pytest.raises(SystemExit, match="X.eta.spd:3: not an increasing"):
+        gen.generate(bad, tmp_path / "out2")

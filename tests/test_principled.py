@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 import rdsl
 from _bsdf_harness import SceneBsdfs
-from _mitsuba_render import block_error, render_both
+from _mitsuba_render import block_error, mitsuba_variant, render_both
 from rdsl.compiler.diagnostics import CompileError
 from rdsl.runtime.scene.loader import load_scene_description
 
@@ -63,15 +63,8 @@ def _mi_dict(case: dict[str, Any]) -> dict[str, Any]:
 
 @pytest.fixture(params=["rgb", "spectral"])
 def variant(request) -> Iterator[tuple[str, Any]]:
-    mi = pytest.importorskip("mitsuba", reason="the mitsuba package is not installed")
-    previous = mi.variant()
-    try:
-        mi.set_variant(f"scalar_{request.param}")
-    except Exception as e:  # noqa: BLE001 - a build without it
-        pytest.skip(f"mitsuba scalar_{request.param} unavailable: {e}")
-    yield request.param, mi
-    if previous is not None:
-        mi.set_variant(previous)
+    with mitsuba_variant(f"scalar_{request.param}") as mi:
+        yield request.param, mi
 
 
 def _sphere(n: int, seed: int) -> np.ndarray:
