@@ -1,5 +1,6 @@
-"""The `principled` BSDF (stdlib/bsdf/principled.rdsl, Mitsuba 3's principled.cpp) against
-Mitsuba 3 itself: eval() and pdf() of scenes' principled BSDFs (parameters as Mitsuba takes
+"""The `principled` and `principledthin` BSDFs (stdlib/bsdf/principled.rdsl and
+principledthin.rdsl, Mitsuba 3's principled.cpp and principledthin.cpp) against Mitsuba 3
+itself: eval() and pdf() of scenes' principled BSDFs (parameters as Mitsuba takes
 them, `specular` and `eta` included) at directions over the whole sphere, in scalar_rgb and
 scalar_spectral; sample() against pdf() by the test kit's chi-square (and its other checks)
 for lobe mixes that exercise every lobe, in every variant; and the loader's errors."""
@@ -20,23 +21,47 @@ from rdsl.runtime.scene.loader import load_scene_description
 
 f32 = np.float32
 ROOT = Path(__file__).resolve().parents[1]
-CASES: list[dict[str, Any]] = [
-    {},  # Mitsuba's defaults: base_color 0.5, roughness 0.5, specular 0.5
-    {"base_color": (0.8, 0.3, 0.1), "metallic": 0.7, "roughness": 0.3, "spec_tint": 0.4},
-    {"base_color": (0.2, 0.6, 0.9), "spec_trans": 0.8, "eta": 1.33, "roughness": 0.25},
-    {"base_color": (0.9, 0.8, 0.3), "sheen": 0.8, "sheen_tint": 0.6, "flatness": 0.5,
-     "clearcoat": 0.7, "clearcoat_gloss": 0.4, "roughness": 0.6},
-    {"base_color": (0.5, 0.9, 0.4), "anisotropic": 0.6, "roughness": 0.4, "metallic": 0.3,
-     "specular": 0.8, "spec_trans": 0.4, "clearcoat": 0.5,
-     "main_specular_sampling_rate": 2.0, "diffuse_reflectance_sampling_rate": 0.5,
-     "clearcoat_sampling_rate": 0.3},
+CASES: list[tuple[str, dict[str, Any]]] = [
+    ("principled", {}),  # Mitsuba's defaults: base_color 0.5, roughness 0.5, specular 0.5
+    ("principled", {"base_color": (0.8, 0.3, 0.1), "metallic": 0.7, "roughness": 0.3,
+                    "spec_tint": 0.4}),
+    ("principled", {"base_color": (0.2, 0.6, 0.9), "spec_trans": 0.8, "eta": 1.33,
+                    "roughness": 0.25}),
+    ("principled", {"base_color": (0.9, 0.8, 0.3), "sheen": 0.8, "sheen_tint": 0.6,
+                    "flatness": 0.5, "clearcoat": 0.7, "clearcoat_gloss": 0.4,
+                    "roughness": 0.6}),
+    ("principled", {"base_color": (0.5, 0.9, 0.4), "anisotropic": 0.6, "roughness": 0.4,
+                    "metallic": 0.3, "specular": 0.8, "spec_trans": 0.4, "clearcoat": 0.5,
+                    "main_specular_sampling_rate": 2.0,
+                    "diffuse_reflectance_sampling_rate": 0.5,
+                    "clearcoat_sampling_rate": 0.3}),
+    ("principledthin", {}),
+    ("principledthin", {"base_color": (0.8, 0.3, 0.1), "spec_trans": 0.7, "eta": 1.4,
+                        "roughness": 0.3, "spec_tint": 0.5}),
+    ("principledthin", {"base_color": (0.3, 0.7, 0.5), "diff_trans": 1.2, "sheen": 0.8,
+                        "sheen_tint": 0.4, "flatness": 0.6, "anisotropic": 0.5,
+                        "spec_trans": 0.3, "roughness": 0.45,
+                        "specular_reflectance_sampling_rate": 2.0,
+                        "diffuse_transmittance_sampling_rate": 0.5}),
 ]
-MIXES = [  # the test kit's -p options: lobe mixes for sample() vs pdf()
-    [],
-    ["spec_trans=0.6", "clearcoat=0.8", "roughness=0.3", "anisotropic=0.5", "metallic=0.2",
-     "sheen=0.5", "spec_tint=0.3", "sheen_tint=0.5", "flatness=0.4", "base_color=0.8,0.5,0.2"],
-    ["spec_trans=1.0", "roughness=0.15", "eta=1.6"],
-]
+# the test kit's -p options per plugin: lobe mixes for sample() vs pdf(); the second has
+# every lobe
+MIXES = {
+    "principled": [
+        [],
+        ["spec_trans=0.6", "clearcoat=0.8", "roughness=0.3", "anisotropic=0.5",
+         "metallic=0.2", "sheen=0.5", "spec_tint=0.3", "sheen_tint=0.5", "flatness=0.4",
+         "base_color=0.8,0.5,0.2"],
+        ["spec_trans=1.0", "roughness=0.15", "eta=1.6"],
+    ],
+    "principledthin": [
+        [],
+        ["spec_trans=0.6", "diff_trans=0.8", "roughness=0.3", "anisotropic=0.5", "sheen=0.5",
+         "spec_tint=0.3", "sheen_tint=0.5", "flatness=0.4", "base_color=0.8,0.5,0.2",
+         "eta=1.4"],
+        ["spec_trans=1.0", "roughness=0.15", "eta=1.6"],
+    ],
+}
 
 
 def _xml_value(name: str, value: Any) -> str:
@@ -45,17 +70,17 @@ def _xml_value(name: str, value: Any) -> str:
     return f'<float name="{name}" value="{value}"/>'
 
 
-def _scene(tmp_path: Path, cases: list[dict[str, Any]]) -> Path:
-    shapes = "".join('<shape type="sphere"><bsdf type="principled">'
+def _scene(tmp_path: Path, cases: list[tuple[str, dict[str, Any]]]) -> Path:
+    shapes = "".join(f'<shape type="sphere"><bsdf type="{kind}">'
                      + "".join(_xml_value(k, v) for k, v in case.items())
-                     + "</bsdf></shape>" for case in cases)
+                     + "</bsdf></shape>" for kind, case in cases)
     path = tmp_path / "principled.xml"
     path.write_text(f'<scene version="3.0.0">{shapes}</scene>')
     return path
 
 
-def _mi_dict(case: dict[str, Any]) -> dict[str, Any]:
-    out: dict[str, Any] = {"type": "principled"}
+def _mi_dict(case: dict[str, Any], kind: str = "principled") -> dict[str, Any]:
+    out: dict[str, Any] = {"type": kind}
     for k, v in case.items():
         out[k] = {"type": "rgb", "value": list(v)} if isinstance(v, tuple) else v
     return out
@@ -108,34 +133,36 @@ def test_eval_and_pdf_match_mitsuba(tmp_path, variant):
     wo = _sphere(n, 4)
     mirror = np.stack([-wi[:, 0], -wi[:, 1], wi[:, 2]], -1) + 0.15 * _sphere(n, 5)
     wo[: n // 2] = (mirror / np.linalg.norm(mirror, axis=1, keepdims=True))[: n // 2]
-    for k, case in enumerate(CASES):
+    for k, (kind, case) in enumerate(CASES):
         h = bsdfs[k]
         lam = h.wavelengths(n)
         ours_f = np.asarray(h.eval(_surfaces(wi), wo), np.float64).reshape(n, -1)
         ours_p = np.asarray(h.pdf(_surfaces(wi), wo), np.float64)
-        theirs_f, theirs_p = _mitsuba(mi, mi.load_dict(_mi_dict(case)), wi, wo, lam)
+        theirs_f, theirs_p = _mitsuba(mi, mi.load_dict(_mi_dict(case, kind)), wi, wo, lam)
         assert ours_f.shape == theirs_f.shape
         assert (theirs_f > 0).any() and (theirs_p > 0).mean() > 0.3, case
         np.testing.assert_allclose(ours_f, theirs_f, rtol=5e-4, atol=1e-5 * theirs_f.max(),
-                                   err_msg=f"eval {case} ({name})")
+                                   err_msg=f"eval {kind} {case} ({name})")
         np.testing.assert_allclose(ours_p, theirs_p, rtol=5e-4, atol=1e-5 * theirs_p.max(),
-                                   err_msg=f"pdf {case} ({name})")
+                                   err_msg=f"pdf {kind} {case} ({name})")
 
 
 # every mix in rgb; the one with every lobe in the other variants
-KIT_RUNS = [("rgb", m) for m in range(len(MIXES))] + [
-    (v, 1) for v in ("mono", "spectral", "mono_polarized", "spectral_polarized")]
+KIT_RUNS = [(k, "rgb", m) for k in MIXES for m in range(len(MIXES[k]))] + [
+    (k, v, 1) for k in MIXES for v in ("mono", "spectral", "mono_polarized",
+                                       "spectral_polarized")]
 
 
-@pytest.mark.parametrize("variant,mix", KIT_RUNS, ids=[f"{v}-{m}" for v, m in KIT_RUNS])
-def test_principled_passes_the_test_kit(capsys, variant: str, mix: int):
-    """`rdsl test-plugin stdlib/bsdf/principled.rdsl -p ...`: chi-square of sample() against
+@pytest.mark.parametrize("kind,variant,mix", KIT_RUNS,
+                         ids=[f"{k}-{v}-{m}" for k, v, m in KIT_RUNS])
+def test_passes_the_test_kit(capsys, kind: str, variant: str, mix: int):
+    """`rdsl test-plugin stdlib/bsdf/KIND.rdsl -p ...`: chi-square of sample() against
     pdf() (from above, and from below where it transmits), weight == eval / pdf, pdf ==
     pdf(), the albedo at most 1, finite values at grazing angles and extreme parameters."""
     from rdsl.cli import main
 
-    args = [a for p in MIXES[mix] for a in ("-p", p)]
-    rc = main(["test-plugin", str(ROOT / "stdlib" / "bsdf" / "principled.rdsl"), *args,
+    args = [a for p in MIXES[kind][mix] for a in ("-p", p)]
+    rc = main(["test-plugin", str(ROOT / "stdlib" / "bsdf" / f"{kind}.rdsl"), *args,
                "--variant", variant, "--samples", "100000"])
     out = capsys.readouterr().out
     assert rc == 0 and " FAIL" not in out, out
@@ -166,7 +193,7 @@ def test_specular_sets_eta_as_mitsuba(tmp_path, variant):
     _, mi = variant
     for params in ({"specular": 0.8}, {"specular": 0.0, "spec_trans": 0.5},
                    {"eta": 1.0, "spec_trans": 0.5}, {"eta": 1.7}):
-        path = _scene(tmp_path, [params])
+        path = _scene(tmp_path, [("principled", params)])
         ours = load_scene_description(path).shapes[0].bsdf.params["eta"]
         p = mi.traverse(mi.load_dict(_mi_dict(params)))
         theirs = float(p["eta"]) if "eta" in params else \
@@ -214,6 +241,15 @@ RENDER = """<scene version="3.0.0">
       <float name="sheen" value="1.0"/><float name="sheen_tint" value="0.8"/>
     </bsdf>
   </shape>
+  <shape type="rectangle">
+    <transform name="to_world"><scale x="0.5" y="0.4"/><rotate x="1" angle="70"/>
+      <translate x="0.1" y="-0.9" z="0.45"/></transform>
+    <bsdf type="principledthin">
+      <rgb name="base_color" value="0.9, 0.4, 0.6"/><float name="spec_trans" value="0.5"/>
+      <float name="diff_trans" value="0.8"/><float name="roughness" value="0.3"/>
+      <float name="eta" value="1.3"/>
+    </bsdf>
+  </shape>
 </scene>
 """
 
@@ -221,7 +257,7 @@ RENDER = """<scene version="3.0.0">
 @pytest.mark.parametrize("variant", ["rgb", "spectral"])
 def test_render_matches_mitsuba(tmp_path, variant):
     """A floor whose base colour and roughness are textures, a glass-like and a sheeny
-    sphere under a constant sky, rendered by rdsl and by Mitsuba 3 (path, 1024 spp,
+    sphere and a thin translucent sheet (principledthin) under a constant sky, rendered by rdsl and by Mitsuba 3 (path, 1024 spp,
     24 x 24).  (No area light: a `diffuse` floor under a rectangle light already differs
     from Mitsuba by ~1% with interreflections, whatever the BSDFs; see the branch's report.)"""
     path = tmp_path / "principled_render.xml"

@@ -161,6 +161,14 @@ _SPECS = [
         "main_specular_sampling_rate": P("float", 1.0),
         "clearcoat_sampling_rate": P("float", 1.0),  # Mitsuba 3.9's code (its docs say 0)
         **{k: P("ftex", 0.0) for k in _PRINCIPLED_LOBES}}),
+    PluginSpec("bsdf", "principledthin", {
+        "base_color": P("color", 0.5), "roughness": P("ftex", 0.5), "eta": P("ftex", 1.5),
+        "diff_trans": P("ftex", 0.0),
+        **{f"{k}_sampling_rate": P("float", 1.0) for k in (
+            "specular_reflectance", "specular_transmittance", "diffuse_reflectance",
+            "diffuse_transmittance")},
+        **{k: P("ftex", 0.0) for k in _PRINCIPLED_LOBES
+           if k not in ("metallic", "clearcoat", "clearcoat_gloss")}}),
     # a pass-through (Mitsuba's null.cpp): light goes straight on, as mask's share
     PluginSpec("bsdf", "null", {}),
     PluginSpec("bsdf", "twosided", {}, {"bsdf": (1, 2)}),
