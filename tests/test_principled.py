@@ -257,9 +257,8 @@ RENDER = """<scene version="3.0.0">
 @pytest.mark.parametrize("variant", ["rgb", "spectral"])
 def test_render_matches_mitsuba(tmp_path, variant):
     """A floor whose base colour and roughness are textures, a glass-like and a sheeny
-    sphere and a thin translucent sheet (principledthin) under a constant sky, rendered by rdsl and by Mitsuba 3 (path, 1024 spp,
-    24 x 24).  (No area light: a `diffuse` floor under a rectangle light already differs
-    from Mitsuba by ~1% with interreflections, whatever the BSDFs; see the branch's report.)"""
+    sphere and a thin translucent sheet (principledthin) under a constant sky, rendered by
+    rdsl and by Mitsuba 3 (path, 1024 spp, 24 x 24)."""
     path = tmp_path / "principled_render.xml"
     path.write_text(RENDER)
     # (a bitmap, not a checkerboard: Mitsuba 3's checkerboard gives eval_1 its colours swapped)

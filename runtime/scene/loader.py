@@ -373,7 +373,9 @@ class _Builder:
         p["to_world"] = m
         obj.mesh = meshes.to_world(mesh, m, p["flip_normals"], face_normals)
         bsdfs, ems = objects["bsdf"], objects["emitter"]
-        obj.bsdf = bsdfs[0][0] if bsdfs else self.default("bsdf", "diffuse")
+        # Mitsuba's default (shape.cpp): diffuse, black on an emitter's shape
+        obj.bsdf = bsdfs[0][0] if bsdfs else self.default(
+            "bsdf", "diffuse", **({"reflectance": 0.0} if ems else {}))
         if ems:
             em, ch = ems[0]
             if em.type != "area" and em.decl is None:
