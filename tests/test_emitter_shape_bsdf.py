@@ -36,7 +36,7 @@ SCENE = """<scene version="3.0.0">
 def test_default_bsdfs(tmp_path):
     path = tmp_path / "scene.xml"
     path.write_text(SCENE)
-    light, floor, sphere = load_scene_description(path).shapes
+    light, _floor, sphere = load_scene_description(path).shapes
     assert light.bsdf.type == "diffuse" and light.bsdf.params["reflectance"].rgb == (0, 0, 0)
     assert sphere.bsdf.type == "diffuse"
     assert sphere.bsdf.params["reflectance"].rgb == (0.5, 0.5, 0.5)
