@@ -49,3 +49,19 @@ def block_error(ours: np.ndarray, theirs: np.ndarray, b: int = 6) -> float:
         h, w, c = img.shape
         return img.reshape(h // b, b, w // b, b, c).mean(axis=(1, 3))
     return float((np.abs(blocks(ours) - blocks(theirs)) / (0.05 + blocks(theirs))).max())
+
+
+def scene_header(origin: str, target: str, up: str, fov: float = 40.0, res: int = 24,
+                 max_depth: int = 8) -> str:
+    """A scene's opening: `<scene>`, a `path` integrator and a perspective camera looking
+    from ``origin`` at ``target`` on a res x res film (close it with ``</scene>``)."""
+    return f"""<scene version="3.0.0">
+  <integrator type="path"><integer name="max_depth" value="{max_depth}"/></integrator>
+  <sensor type="perspective">
+    <float name="fov" value="{fov}"/>
+    <transform name="to_world"><lookat origin="{origin}" target="{target}" up="{up}"/>
+    </transform>
+    <film type="hdrfilm"><integer name="width" value="{res}"/>
+      <integer name="height" value="{res}"/></film>
+  </sensor>
+"""

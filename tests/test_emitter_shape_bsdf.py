@@ -6,18 +6,10 @@ brighter than Mitsuba 3 in this scene; with the black default it matches."""
 from __future__ import annotations
 
 import numpy as np
-from _mitsuba_render import render_both
+from _mitsuba_render import render_both, scene_header
 from rdsl.runtime.scene.loader import load_scene_description
 
-SCENE = """<scene version="3.0.0">
-  <integrator type="path"><integer name="max_depth" value="8"/></integrator>
-  <sensor type="perspective">
-    <float name="fov" value="40"/>
-    <transform name="to_world"><lookat origin="0, -4, 2" target="0, 0, 0.45" up="0, 0, 1"/>
-    </transform>
-    <film type="hdrfilm"><integer name="width" value="24"/>
-      <integer name="height" value="24"/></film>
-  </sensor>
+SCENE = scene_header("0, -4, 2", "0, 0, 0.45", "0, 0, 1") + """
   <shape type="rectangle">
     <transform name="to_world"><scale value="0.8"/><translate x="1" y="-1" z="1"/></transform>
     <boolean name="flip_normals" value="true"/>

@@ -11,18 +11,10 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from _mitsuba_render import block_error, render_both
+from _mitsuba_render import block_error, render_both, scene_header
 
 RES, SPP = 24, 1024
-SCENE = """<scene version="3.0.0">
-  <integrator type="path"><integer name="max_depth" value="6"/></integrator>
-  <sensor type="perspective">
-    <float name="fov" value="50"/>
-    <transform name="to_world"><lookat origin="0, -1.5, 4" target="0, 0, 0" up="0, 1, 0"/>
-    </transform>
-    <film type="hdrfilm"><integer name="width" value="{res}"/>
-      <integer name="height" value="{res}"/></film>
-  </sensor>
+SCENE = scene_header("0, -1.5, 4", "0, 0, 0", "0, 1, 0", fov=50, res=RES, max_depth=6) + """
   <shape type="rectangle">
     <transform name="to_world"><scale value="2"/></transform>
     <bsdf type="diffuse"><rgb name="reflectance" value="0.6, 0.5, 0.3"/></bsdf>
@@ -51,7 +43,7 @@ SCENE = """<scene version="3.0.0">
 @pytest.mark.parametrize("variant", ["rgb", "spectral"])
 def test_null_scene_matches_mitsuba(tmp_path: Path, variant: str):
     path = tmp_path / "null.xml"
-    path.write_text(SCENE.format(res=RES))
+    path.write_text(SCENE)
     img, ref = render_both(path, variant, SPP)
     # the light's back is black, the floor seen through the light and the occluder is lit
     assert ref.mean() > 0.05

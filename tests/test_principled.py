@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 import rdsl
 from _bsdf_harness import SceneBsdfs
-from _mitsuba_render import block_error, mitsuba_variant, render_both
+from _mitsuba_render import block_error, mitsuba_variant, render_both, scene_header
 from rdsl.compiler.diagnostics import CompileError
 from rdsl.runtime.scene.loader import load_scene_description
 
@@ -201,15 +201,7 @@ def test_specular_sets_eta_as_mitsuba(tmp_path, variant):
         assert ours == pytest.approx(theirs, rel=1e-6), params
 
 
-RENDER = """<scene version="3.0.0">
-  <integrator type="path"><integer name="max_depth" value="8"/></integrator>
-  <sensor type="perspective">
-    <float name="fov" value="40"/>
-    <transform name="to_world"><lookat origin="0, -4, 2" target="0, 0, 0.45" up="0, 0, 1"/>
-    </transform>
-    <film type="hdrfilm"><integer name="width" value="24"/>
-      <integer name="height" value="24"/></film>
-  </sensor>
+RENDER = scene_header("0, -4, 2", "0, 0, 0.45", "0, 0, 1") + """
   <emitter type="constant"><rgb name="radiance" value="0.9, 1.0, 1.1"/></emitter>
   <shape type="rectangle">
     <transform name="to_world"><scale value="3"/></transform>
