@@ -32,6 +32,7 @@ from .analytic import Analytic
 from .camera import fov_x
 from .errors import scene_error
 from .meshes import Mesh, MeshError
+from .principled import resolve_principled
 from .reads import memoized
 from .schema import (
     AOV_TYPES,
@@ -372,7 +373,9 @@ class _Builder:
         p["to_world"] = m
         obj.mesh = meshes.to_world(mesh, m, p["flip_normals"], face_normals)
         bsdfs, ems = objects["bsdf"], objects["emitter"]
-        obj.bsdf = bsdfs[0][0] if bsdfs else self.default("bsdf", "diffuse")
+        # Mitsuba's default (shape.cpp): diffuse, black on an emitter's shape
+        obj.bsdf = bsdfs[0][0] if bsdfs else self.default(
+            "bsdf", "diffuse", **({"reflectance": 0.0} if ems else {}))
         if ems:
             em, ch = ems[0]
             if em.type != "area" and em.decl is None:
@@ -385,6 +388,9 @@ class _Builder:
         obj.children = [b for b, _ in objects.get("bsdf", [])]
         if obj.decl is not None:  # a user plugin: its params are its own, not Mitsuba's
             return
+        if obj.type == "principled":
+            resolve_principled(p, lambda k: _loc(node, k) is not node.loc, self.what(node),
+                               lambda k: _loc(node, k))
         if "material" in p:
             given = [k for k in ("eta", "k") if p[k] is not None]
             if given and "material" in node.props:

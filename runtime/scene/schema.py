@@ -110,6 +110,9 @@ _PLASTIC = {"diffuse_reflectance": P("color", 0.5), "specular_reflectance": P("c
             "int_ior": P("ior", "polypropylene"), "ext_ior": P("ior", "air"),
             "nonlinear": P("boolean", False)}
 _TEX = {"to_uv": P("transform")}
+# principled's lobe weights: Mitsuba takes each as a float or a texture, default 0
+_PRINCIPLED_LOBES = ("anisotropic", "metallic", "spec_trans", "spec_tint", "sheen",
+                     "sheen_tint", "flatness", "clearcoat", "clearcoat_gloss")
 _CAMERA = {
     "to_world": P("transform"), "fov": P("float"),
     "fov_axis": P("string", "x", ("x", "y", "diagonal", "smaller", "larger")),
@@ -152,6 +155,22 @@ _SPECS = [
                                      "transmittance": P("color", 1.0),
                                      "polarizing": P("boolean", True)}),
     PluginSpec("bsdf", "retarder", {"theta": P("fconst", 0.0), "delta": P("fconst", 90.0)}),
+    PluginSpec("bsdf", "principled", {
+        "base_color": P("color", 0.5), "roughness": P("ftex", 0.5), "eta": P("float"),
+        "specular": P("float", 0.5), "diffuse_reflectance_sampling_rate": P("float", 1.0),
+        "main_specular_sampling_rate": P("float", 1.0),
+        "clearcoat_sampling_rate": P("float", 1.0),  # Mitsuba 3.9's code (its docs say 0)
+        **{k: P("ftex", 0.0) for k in _PRINCIPLED_LOBES}}),
+    PluginSpec("bsdf", "principledthin", {
+        "base_color": P("color", 0.5), "roughness": P("ftex", 0.5), "eta": P("ftex", 1.5),
+        "diff_trans": P("ftex", 0.0),
+        **{f"{k}_sampling_rate": P("float", 1.0) for k in (
+            "specular_reflectance", "specular_transmittance", "diffuse_reflectance",
+            "diffuse_transmittance")},
+        **{k: P("ftex", 0.0) for k in _PRINCIPLED_LOBES
+           if k not in ("metallic", "clearcoat", "clearcoat_gloss")}}),
+    # a pass-through (Mitsuba's null.cpp): light goes straight on, as mask's share
+    PluginSpec("bsdf", "null", {}),
     PluginSpec("bsdf", "twosided", {}, {"bsdf": (1, 2)}),
     PluginSpec("bsdf", "mask", {"opacity": P("ftex", 0.5)}, {"bsdf": (1, 1)}),
     PluginSpec("bsdf", "blendbsdf", {"weight": P("ftex", REQUIRED)}, {"bsdf": (2, 2)}),
