@@ -22,10 +22,12 @@ class Build:
     model: ColorModel
 
     @classmethod
-    def of(cls, target: str | Target = "host", variant: str | ColorModel = "rgb") -> Build:
+    def of(cls, target: str | Target = "host", variant: str | ColorModel = "rgb",
+           width: int | None = None) -> Build:
         """The build for a target name (``host`` resolves to this machine's widest) and a
-        variant name; a name that is neither raises a diagnostic listing the valid ones."""
-        return cls(get_target(target), color_model(variant))
+        variant name; a name that is neither raises a diagnostic listing the valid ones.
+        ``width`` picks the SIMD width of target ``c`` (see :func:`get_target`)."""
+        return cls(get_target(target, width), color_model(variant))
 
     @property
     def width(self) -> int:

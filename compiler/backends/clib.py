@@ -153,12 +153,8 @@ def link_shared(obj: bytes, so_path: Path, extra: list[str] | tuple[str, ...] = 
         os.replace(out, so_path)
 
 
-def build_library(module: ir.Module, target: Target | str, out_dir: str | os.PathLike,
-                  stem: str) -> dict[str, Path]:
-    """Write ``<stem>.so``, ``<stem>.h`` and ``<stem>.json`` into ``out_dir``.
-
-    Returns ``{"so": path, "header": path, "manifest": path}``."""
-    t = get_target(target)
+def writable_dir(out_dir: str | os.PathLike) -> Path:
+    """``out_dir``, created if need be, after checking that files can be written there."""
     out = Path(out_dir)
     try:
         out.mkdir(parents=True, exist_ok=True)
@@ -167,6 +163,21 @@ def build_library(module: ir.Module, target: Target | str, out_dir: str | os.Pat
     except OSError as e:
         raise CompileError(f"cannot write to output directory `{out}`: "
                            f"{e.strerror or e}") from None
+    return out
+
+
+def build_library(module: ir.Module, target: Target | str, out_dir: str | os.PathLike,
+                  stem: str) -> dict[str, Path]:
+    """Write ``<stem>.so``, ``<stem>.h`` and ``<stem>.json`` into ``out_dir`` (and
+    ``<stem>.c`` for target ``c``, whose library ``cc`` compiles from it).
+
+    Returns ``{"so": path, "header": path, "manifest": path}``."""
+    t = get_target(target)
+    if t.backend == "c":
+        from .c_build import build_c_library
+
+        return build_c_library(module, t, out_dir, stem)
+    out = writable_dir(out_dir)
     paths = {"so": out / f"{stem}.so", "header": out / f"{stem}.h",
              "manifest": out / f"{stem}.json"}
     for p in paths.values():
