@@ -379,8 +379,9 @@ class CLikePrinter:
         self.line(f"if ({self.v(mask)}) {self.v(buf)}[{self.v(idx)}] = {v};")
 
     def render_ray(self, ins: ir.Instr) -> None:
-        raise CompileError(f"the {self.target_name} backend cannot trace rays: "
-                           f"`{ins.op.value}` needs Embree, which only the LLVM CPU targets "
+        what = "trace" if ins.op is ir.Op.INTERSECT else "occluded"
+        raise CompileError(f"the {self.target_name} backend cannot trace rays: `{what}` (IR "
+                           f"`{ins.op.value}`) needs Embree, which only the LLVM CPU targets "
                            "link (a BVH written in rdsl is not there yet); compile this "
                            "kernel for scalar, sse4, avx2 or avx512", ins.loc)
 
