@@ -7,6 +7,7 @@ that links the generated source and calls a kernel on an array of structures; ba
 from __future__ import annotations
 
 import ctypes
+import re
 import shutil
 import subprocess
 from pathlib import Path
@@ -19,7 +20,8 @@ from rdsl.compiler.build import Build
 from rdsl.compiler.diagnostics import CompileError
 from rdsl.compiler.driver import compile_kernels
 from rdsl.compiler.targets import get_target, host_supports
-from test_cli import assert_user_error, rdsl as rdsl_cli
+from test_cli import assert_user_error
+from test_cli import rdsl as rdsl_cli
 from test_differential import CASES, CORPUS, check_case, interp_modules  # noqa: F401
 
 CC = shutil.which("cc") or shutil.which("gcc") or shutil.which("clang")
@@ -37,7 +39,7 @@ def c_compiled():
 
 @needs_cc
 @pytest.mark.parametrize("case", sorted(CASES), ids=lambda c: f"{c[0]}.{c[1]}")
-def test_corpus_matches_interpreter(case, interp_modules, c_compiled):
+def test_corpus_matches_interpreter(case, interp_modules, c_compiled):  # noqa: F811
     check_case(case, interp_modules[case[0]], c_compiled)
 
 # -- every stdlib BSDF: C (width 8, -Werror) against the avx2 LLVM build ------------------
@@ -105,9 +107,11 @@ def test_stdlib_bsdf_matches_avx2(path: Path, tmp_path: Path):
     lib = ctypes.CDLL(str(tmp_path / "lib.so"))
     ref = rdsl.jit(path, target="avx2")
     names = {k["name"].rsplit(".", 1)[-1] for k in ref.manifest["kernels"]}
-    assert path.stem == "common" or {"eval", "pdf", "sample"} <= names, names
+    if re.search(r"^bsdf \w+", path.read_text(), re.MULTILINE):  # a plugin, not a library
+        assert {"eval", "pdf", "sample"} <= names, names
     rng = np.random.default_rng(3)
     n = 999  # not a multiple of 8: the tail is masked
+    nonzero = 0
     for k in ref.manifest["kernels"]:
         inputs = _random_inputs(k, n, rng)
         got = _call_raw(lib, k, inputs, n)
@@ -116,8 +120,9 @@ def test_stdlib_bsdf_matches_avx2(path: Path, tmp_path: Path):
         for name, g, w in zip(outs, got, want):
             assert np.array_equal(_bits(g), _bits(w)), \
                 f"{k['name']}.{name}: {np.sum(_bits(g) != _bits(w))} of {n} lanes differ"
-        nonzero = sum(np.count_nonzero(w) for w in want)
-        assert nonzero > 0 or not outs, f"{k['name']}: every output is 0 (a vacuous check)"
+        nonzero += sum(np.count_nonzero(w) for w in want)
+    # per module: a delta BSDF's eval is 0 everywhere, its sample is not
+    assert nonzero > 0, "every output is 0 (a vacuous check)"
 
 
 # -- a C host program: the generated header, its own array of structures -----------------

@@ -7,14 +7,13 @@ from __future__ import annotations
 
 import json
 import os
-import subprocess
 from pathlib import Path
 
 from .. import ir
 from ..diagnostics import CompileError
 from ..targets import Target
 from .c import emit_c
-from .clib import _cc, header, manifest, writable_dir
+from .clib import _cc, header, manifest, run_cc, writable_dir
 
 # -std=c11: vector extensions are accepted in ISO mode and GCC does not contract a*b+c
 # into FMA there; -ffp-contract=off says so for any compiler (the IR's semantics are exact)
@@ -22,20 +21,10 @@ CFLAGS = ("-std=c11", "-O2", "-march=native", "-ffp-contract=off", "-fPIC")
 
 
 def compile_shared(c_path: Path, so_path: Path, flags: tuple[str, ...] = CFLAGS) -> None:
-    """``cc FLAGS -shared -o so_path c_path -lm``, written next to the destination and
-    renamed into place (a process with the old library mapped keeps a valid file)."""
+    """``cc FLAGS -shared c_path -lm -o so_path``."""
     cc = _cc()
-    out = so_path.with_name(f".{so_path.name}.{os.getpid()}.tmp")
-    cmd = [cc, *flags, "-shared", "-o", str(out), str(c_path), "-lm"]
-    try:
-        r = subprocess.run(cmd, capture_output=True, text=True)
-    except OSError as e:
-        raise CompileError(f"cannot run the C compiler `{cc}`: {e}") from None
-    if r.returncode != 0:
-        out.unlink(missing_ok=True)
-        raise CompileError(f"compiling {c_path.name} with `{' '.join(cmd[:-4])}` failed:\n"
-                           + (r.stderr or r.stdout).strip())
-    os.replace(out, so_path)
+    run_cc(cc, [*flags, "-shared", str(c_path), "-lm"], so_path,
+           f"compiling {c_path.name} with `{cc} {' '.join(flags)}`")
 
 
 def build_c_library(module: ir.Module, target: Target, out_dir: str | os.PathLike,

@@ -38,10 +38,10 @@ def prelude(width: int, stem: str) -> list[str]:
            "#if defined(__clang__)", "#pragma clang fp contract(off)",
            "#elif defined(__GNUC__)", '#pragma GCC optimize("fp-contract=off")', "#endif",
            "",
-           "static inline uint32_t rdsl_f2u(float x) { uint32_t u; memcpy(&u, &x, 4); "
-           "return u; }",
-           "static inline float rdsl_u2f(uint32_t u) { float x; memcpy(&x, &u, 4); "
-           "return x; }", ""]
+           ("static inline uint32_t rdsl_f2u(float x) { uint32_t u; memcpy(&u, &x, 4); "
+            "return u; }"),
+           ("static inline float rdsl_u2f(uint32_t u) { float x; memcpy(&x, &u, 4); "
+            "return x; }"), ""]
     if W == 1:
         return out
     out += [f"#define RDSL_W {W}"]

@@ -18,6 +18,7 @@ following ``-ffp-contract=on`` or ``off`` (``c.py`` asks for ``off``).
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 from typing import Any, ClassVar
 
@@ -37,7 +38,7 @@ def f32_literal(value: Any) -> str:
     """An exact C literal of the f32 nearest ``value`` (hex float; INFINITY, NAN)."""
     with np.errstate(over="ignore"):
         x = float(np.float32(value))
-    if x != x:
+    if math.isnan(x):
         return "NAN"
     if x in (float("inf"), float("-inf")):
         return "INFINITY" if x > 0 else "(-INFINITY)"

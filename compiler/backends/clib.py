@@ -138,19 +138,24 @@ def link_shared(obj: bytes, so_path: Path, extra: list[str] | tuple[str, ...] = 
     with tempfile.TemporaryDirectory(prefix="rdsl-link-") as tmp:
         o = Path(tmp) / "kernels.o"
         o.write_bytes(obj)
-        # link next to the destination, then rename: a process that has the old library
-        # mapped keeps a valid file
-        out = so_path.with_name(f".{so_path.name}.{os.getpid()}.tmp")
-        try:
-            r = subprocess.run([cc, "-shared", "-o", str(out), str(o), *extra, "-lm"],
-                               capture_output=True, text=True)
-        except OSError as e:
-            raise CompileError(f"cannot run the C compiler `{cc}`: {e}") from None
-        if r.returncode != 0:
-            out.unlink(missing_ok=True)
-            raise CompileError(f"linking {so_path.name} with `{cc} -shared` failed:\n"
-                               + (r.stderr or r.stdout).strip())
-        os.replace(out, so_path)
+        run_cc(cc, ["-shared", str(o), *extra, "-lm"], so_path,
+               f"linking {so_path.name} with `{cc} -shared`")
+
+
+def run_cc(cc: str, args: list[str], so_path: Path, what: str) -> None:
+    """``cc ARGS -o so_path``, written next to the destination and renamed into place (a
+    process that has the old library mapped keeps a valid file); ``what`` names the step
+    in the diagnostic when it fails."""
+    out = so_path.with_name(f".{so_path.name}.{os.getpid()}.tmp")
+    try:
+        r = subprocess.run([cc, *args, "-o", str(out)], capture_output=True, text=True,
+                           check=False)
+    except OSError as e:
+        raise CompileError(f"cannot run the C compiler `{cc}`: {e}") from None
+    if r.returncode != 0:
+        out.unlink(missing_ok=True)
+        raise CompileError(f"{what} failed:\n" + (r.stderr or r.stdout).strip())
+    os.replace(out, so_path)
 
 
 def writable_dir(out_dir: str | os.PathLike) -> Path:
