@@ -44,7 +44,6 @@ def build_c_library(module: ir.Module, target: Target, out_dir: str | os.PathLik
             raise CompileError(f"cannot write `{p}`: it exists and is not a regular file")
     source = emit_c(module, stem)
     man = manifest(module, target)
-    man["backend"] = "c"
     man["cflags"] = list(CFLAGS)
     try:
         paths["c"].write_text(source)

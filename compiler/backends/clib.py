@@ -85,7 +85,7 @@ def manifest(module: ir.Module, target: Target) -> dict[str, Any]:
             "prototype": c_prototype(fn),
         })
     return {"rdsl_version": __version__, "abi": ABI_VERSION, "strides": "bytes",
-            "target": target.name, "width": target.width,
+            "target": target.name, "width": target.width, "backend": target.backend,
             "variant": module.attrs.get("variant"), "kernels": out}
 
 
