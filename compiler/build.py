@@ -28,12 +28,14 @@ class Build:
 
     @classmethod
     def of(cls, target: str | Target = "host", variant: str | ColorModel = "rgb",
-           ad: str | None = None) -> Build:
+           width: int | None = None, ad: str | None = None) -> Build:
         """The build for a target name (``host`` resolves to this machine's widest) and a
-        variant name; a name that is neither raises a diagnostic listing the valid ones."""
+        variant name; a name that is neither raises a diagnostic listing the valid ones.
+        ``width`` picks the SIMD width of target ``c`` (see :func:`get_target`); ``ad`` the
+        differentiation mode (None, or "forward": docs/ad.md)."""
         if ad not in AD_MODES:
             raise CompileError(f"unknown differentiation mode `{ad}` (valid: forward)")
-        return cls(get_target(target), color_model(variant), ad)
+        return cls(get_target(target, width), color_model(variant), ad)
 
     @property
     def width(self) -> int:

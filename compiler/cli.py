@@ -20,6 +20,8 @@ Command = Callable[[argparse.Namespace], int]
 _VARIANTS_HELP = ", ".join(VARIANTS) + " (default: rgb)"
 _AD_HELP = ("differentiate: 'forward' gives each kernel with Float arguments a tangent "
             "argument per argument and a tangent result per Float result (docs/ad.md)")
+_WIDTH_HELP = ("SIMD width of target c: 1, 4, 8 or 16 (default: the host's widest); the "
+               "LLVM targets have their own")
 
 
 def add_commands(sub: argparse._SubParsersAction) -> dict[str, Command]:
@@ -31,6 +33,7 @@ def add_commands(sub: argparse._SubParsersAction) -> dict[str, Command]:
     i.add_argument("file")
     i.add_argument("--variant", default="rgb", help=_VARIANTS_HELP)
     i.add_argument("--target", default="host")
+    i.add_argument("--width", type=int, default=None, help=_WIDTH_HELP)
     i.add_argument("--print-after", default=None, metavar="PASS",
                    help="print after every run of PASS ('lower' for the frontend's IR, "
                         "'all' for every pass); default: the final IR")
@@ -40,13 +43,16 @@ def add_commands(sub: argparse._SubParsersAction) -> dict[str, Command]:
     k = sub.add_parser("compile", help="compile to a shared library, C header and manifest")
     k.add_argument("file")
     k.add_argument("--target", default="host",
-                   help="scalar, sse4, avx2, avx512 or host (default)")
+                   help="scalar, sse4, avx2, avx512, host (default), or c (SIMD C source "
+                        "compiled by the machine's cc)")
+    k.add_argument("--width", type=int, default=None, help=_WIDTH_HELP)
     k.add_argument("--variant", default="rgb", help=_VARIANTS_HELP)
     k.add_argument("-o", "--output", default=None,
                    help="output stem: writes STEM.so, STEM.h and STEM.json "
                         "(default: the source's name in the current folder)")
-    k.add_argument("--emit", choices=["lib", "llvm", "asm", "obj"], default="lib",
-                   help="what to produce; llvm/asm go to stdout unless -o is given")
+    k.add_argument("--emit", choices=["lib", "llvm", "asm", "obj", "c"], default="lib",
+                   help="what to produce; llvm/asm go to stdout unless -o is given; "
+                        "c (target c): only STEM.c, STEM.h and STEM.json, no cc needed")
     k.add_argument("--ad", choices=["forward"], default=None, help=_AD_HELP)
     return {"check": _check, "ir": _ir, "compile": _compile}
 
@@ -72,7 +78,7 @@ def _ir(args: argparse.Namespace) -> int:
     from .passes import pass_names
     from .printer import print_module
 
-    build = Build.of(args.target, args.variant, args.ad)
+    build = Build.of(args.target, args.variant, args.width, args.ad)
     names = pass_names() + ["lower", "all"]
     if args.print_after is not None and args.print_after not in names:
         raise CompileError(f"unknown pass `{args.print_after}` (expected one of: "
@@ -109,8 +115,11 @@ def _compile(args: argparse.Namespace) -> int:
     from .build import Build
     from .driver import compile_kernels
 
-    build = Build.of(args.target, args.variant, args.ad)
+    build = Build.of(args.target, args.variant, args.width, args.ad)
     tgt = build.target
+    if (args.emit == "c") != (tgt.backend == "c") and args.emit != "lib":
+        raise CompileError(f"--emit {args.emit} needs " + ("--target c" if args.emit == "c"
+                           else f"an LLVM target, not `{tgt.name}` (use --emit c or lib)"))
     src = _require_file(args.file).resolve()
     module, _ = compile_kernels(src, build)
     if args.emit in ("llvm", "asm", "obj"):
@@ -126,13 +135,18 @@ def _compile(args: argparse.Namespace) -> int:
         print(f"wrote {out}")
         return 0
     stem = Path(args.output) if args.output else Path(src.stem)
-    if stem.suffix in (".so", ".h", ".json"):
+    if stem.suffix in (".so", ".h", ".json", ".c"):
         stem = stem.with_suffix("")
-    for ext in (".so", ".h", ".json"):
+    for ext in (".so", ".h", ".json", ".c"):
         _refuse_input(stem.with_suffix(ext) if stem.suffix == "" else
                       Path(str(stem) + ext), src)
-    paths = build_library(module, tgt, stem.parent if str(stem.parent) else Path("."),
-                          stem.name)
+    out_dir = stem.parent if str(stem.parent) else Path(".")
+    if args.emit == "c":
+        from .backends.c_build import build_c_library
+
+        paths = build_c_library(module, tgt, out_dir, stem.name, source_only=True)
+    else:
+        paths = build_library(module, tgt, out_dir, stem.name)
     for p in paths.values() if isinstance(paths, dict) else paths:
         print(f"wrote {p}")
     return 0

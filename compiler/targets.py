@@ -1,7 +1,10 @@
 """CPU targets: a SIMD width plus the LLVM CPU name and feature string to compile for.
 
 ``get_target("host")`` picks the widest target this machine can run, from
-``llvmlite.binding.get_host_cpu_features()``.
+``llvmlite.binding.get_host_cpu_features()``.  ``get_target("c", width)`` is the SIMD C
+target (``backend == "c"``, see ``backends/c.py``) at width 1, 4, 8 or 16, compiled by the
+machine's ``cc`` for the machine itself (``-march=native``); without a width it takes the
+host's widest LLVM target's.
 """
 
 from __future__ import annotations
@@ -25,6 +28,7 @@ class Target:
     features: str
     requires: tuple[str, ...] = ()
     vector_bits: int = 128
+    backend: str = "llvm"  # which code generator: "llvm" or "c"
 
     @property
     def triple(self) -> str:
@@ -83,6 +87,8 @@ def host_features() -> frozenset[str]:
 def host_supports(target: Target | str) -> bool:
     """True if code compiled for ``target`` can run on this machine."""
     t = get_target(target) if isinstance(target, str) else target
+    if t.backend == "c":  # compiled by this machine's cc, for this machine
+        return True
     feats = host_features()
     if not feats:
         return t.name == "scalar"
@@ -97,14 +103,39 @@ def host_target() -> Target:
     return TARGETS["scalar"]
 
 
-def get_target(name: str | Target) -> Target:
-    """Look a target up by name (``scalar``, ``sse4``, ``avx2``, ``avx512`` or ``host``)."""
+C_WIDTHS = (1, 4, 8, 16)
+
+
+def c_target(width: int | None = None) -> Target:
+    """The SIMD C target of ``width`` lanes (default: the host's widest LLVM target's)."""
+    if width is None:
+        width = host_target().width
+    if width not in C_WIDTHS:
+        raise CompileError(f"unsupported SIMD width {width} for target `c` (valid widths: "
+                           f"{', '.join(map(str, C_WIDTHS))})")
+    return Target("c", width, "native", "", (), 32 * width, backend="c")
+
+
+def get_target(name: str | Target, width: int | None = None) -> Target:
+    """Look a target up by name (``scalar``, ``sse4``, ``avx2``, ``avx512``, ``host`` or
+    ``c``).  ``width`` picks the width of ``c``; an LLVM target has its own, which a
+    different ``width`` contradicts (a diagnostic)."""
     if isinstance(name, Target):
-        return name
-    if name == "host":
-        return host_target()
-    t = TARGETS.get(name)
-    if t is None:
-        valid = ", ".join([*TARGETS, "host"])
-        raise CompileError(f"unknown target `{name}` (valid targets: {valid})")
+        t = name
+    elif name == "c":
+        return c_target(width)
+    elif name == "host":
+        t = host_target()
+    else:
+        found = TARGETS.get(name)
+        if found is None:
+            valid = ", ".join([*TARGETS, "host", "c"])
+            raise CompileError(f"unknown target `{name}` (valid targets: {valid})")
+        t = found
+    if width is not None and width != t.width:
+        if t.backend == "c":
+            return c_target(width)
+        raise CompileError(f"target `{t.name}` has SIMD width {t.width}, not {width} "
+                           "(a width can be chosen for target `c`, which takes "
+                           f"{', '.join(map(str, C_WIDTHS))})")
     return t

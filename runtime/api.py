@@ -183,10 +183,12 @@ def _source_text(source_or_path: str | os.PathLike) -> str:
 
 def jit(source_or_path: str | os.PathLike, target: str | Target = "host",
         variant: str | ColorModel = "rgb", cache: bool = True, *, build: Build | None = None,
-        **options: Any) -> Module:
+        width: int | None = None, **options: Any) -> Module:
     """Compile ``source_or_path`` (a ``.rdsl`` path or source text) for ``target`` and load it.
 
-    ``build``, when given, replaces ``target`` and ``variant``; a bad name of either is a
+    ``width`` picks the SIMD width of target ``c`` (1, 4, 8 or 16; the C source is compiled
+    by the machine's ``cc``).  ``build``, when given, replaces ``target``, ``variant`` and
+    ``width``; a bad name of either is a
     diagnostic before any source is read.  The library is cached under
     :func:`rdsl.runtime.cache.cache_dir`; a second call with the same sources (imports
     included), target, variant and options loads it without compiling.  ``options`` are
@@ -196,7 +198,7 @@ def jit(source_or_path: str | os.PathLike, target: str | Target = "host",
     from ..compiler.sources import source_files
 
     t0 = time.perf_counter()
-    build = build or Build.of(target, variant)
+    build = build or Build.of(target, variant, width)
     text = _source_text(source_or_path)
     files = [Path(f) for f in source_files(source_or_path, options.get("search_paths") or (),
                                            filename=options.get("filename"))]

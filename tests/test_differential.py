@@ -96,8 +96,14 @@ def _bits(a: np.ndarray) -> np.ndarray:
 
 @pytest.mark.parametrize("case", sorted(CASES), ids=lambda c: f"{c[0]}.{c[1]}")
 def test_matches_interpreter(case, interp_modules, compiled):
+    check_case(case, interp_modules[case[0]], compiled)
+
+
+def check_case(case: tuple[str, str], module, compiled: dict) -> None:
+    """Hypothesis rows of ``case`` (file, kernel) through the interpreter on ``module`` and
+    through every ``compiled[(file, label)]`` kernel module: bitwise equal results and
+    buffers (NaNs canonical)."""
     file, fn_name = case
-    module = interp_modules[file]
     fn = module.functions[fn_name]
     leaf_params = [p for p in fn.params if not p.uniform]
     dtypes = [DTYPES[p.value.type.name] for p in leaf_params]

@@ -85,7 +85,7 @@ def manifest(module: ir.Module, target: Target) -> dict[str, Any]:
             "prototype": c_prototype(fn),
         })
     return {"rdsl_version": __version__, "abi": ABI_VERSION, "strides": "bytes",
-            "target": target.name, "width": target.width,
+            "target": target.name, "width": target.width, "backend": target.backend,
             "variant": module.attrs.get("variant"), "kernels": out}
 
 
@@ -138,27 +138,28 @@ def link_shared(obj: bytes, so_path: Path, extra: list[str] | tuple[str, ...] = 
     with tempfile.TemporaryDirectory(prefix="rdsl-link-") as tmp:
         o = Path(tmp) / "kernels.o"
         o.write_bytes(obj)
-        # link next to the destination, then rename: a process that has the old library
-        # mapped keeps a valid file
-        out = so_path.with_name(f".{so_path.name}.{os.getpid()}.tmp")
-        try:
-            r = subprocess.run([cc, "-shared", "-o", str(out), str(o), *extra, "-lm"],
-                               capture_output=True, text=True)
-        except OSError as e:
-            raise CompileError(f"cannot run the C compiler `{cc}`: {e}") from None
-        if r.returncode != 0:
-            out.unlink(missing_ok=True)
-            raise CompileError(f"linking {so_path.name} with `{cc} -shared` failed:\n"
-                               + (r.stderr or r.stdout).strip())
-        os.replace(out, so_path)
+        run_cc(cc, ["-shared", str(o), *extra, "-lm"], so_path,
+               f"linking {so_path.name} with `{cc} -shared`")
 
 
-def build_library(module: ir.Module, target: Target | str, out_dir: str | os.PathLike,
-                  stem: str) -> dict[str, Path]:
-    """Write ``<stem>.so``, ``<stem>.h`` and ``<stem>.json`` into ``out_dir``.
+def run_cc(cc: str, args: list[str], so_path: Path, what: str) -> None:
+    """``cc ARGS -o so_path``, written next to the destination and renamed into place (a
+    process that has the old library mapped keeps a valid file); ``what`` names the step
+    in the diagnostic when it fails."""
+    out = so_path.with_name(f".{so_path.name}.{os.getpid()}.tmp")
+    try:
+        r = subprocess.run([cc, *args, "-o", str(out)], capture_output=True, text=True,
+                           check=False)
+    except OSError as e:
+        raise CompileError(f"cannot run the C compiler `{cc}`: {e}") from None
+    if r.returncode != 0:
+        out.unlink(missing_ok=True)
+        raise CompileError(f"{what} failed:\n" + (r.stderr or r.stdout).strip())
+    os.replace(out, so_path)
 
-    Returns ``{"so": path, "header": path, "manifest": path}``."""
-    t = get_target(target)
+
+def writable_dir(out_dir: str | os.PathLike) -> Path:
+    """``out_dir``, created if need be, after checking that files can be written there."""
     out = Path(out_dir)
     try:
         out.mkdir(parents=True, exist_ok=True)
@@ -167,6 +168,21 @@ def build_library(module: ir.Module, target: Target | str, out_dir: str | os.Pat
     except OSError as e:
         raise CompileError(f"cannot write to output directory `{out}`: "
                            f"{e.strerror or e}") from None
+    return out
+
+
+def build_library(module: ir.Module, target: Target | str, out_dir: str | os.PathLike,
+                  stem: str) -> dict[str, Path]:
+    """Write ``<stem>.so``, ``<stem>.h`` and ``<stem>.json`` into ``out_dir`` (and
+    ``<stem>.c`` for target ``c``, whose library ``cc`` compiles from it).
+
+    Returns ``{"so": path, "header": path, "manifest": path}``."""
+    t = get_target(target)
+    if t.backend == "c":
+        from .c_build import build_c_library
+
+        return build_c_library(module, t, out_dir, stem)
+    out = writable_dir(out_dir)
     paths = {"so": out / f"{stem}.so", "header": out / f"{stem}.h",
              "manifest": out / f"{stem}.json"}
     for p in paths.values():
