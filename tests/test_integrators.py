@@ -9,9 +9,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-
-SCENES = Path(__file__).resolve().parent.parent.parent / "shared" / "scenes"
-CBOX = SCENES / "cbox" / "cbox.xml"
+from _scenes import CBOX
 
 embree = pytest.importorskip("rdsl.runtime.embree")
 

@@ -9,11 +9,10 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from _scenes import CBOX
 from rdsl.runtime.scene import SceneError, load_scene_description, parse_defines, spectra
 from rdsl.runtime.scene import transform as xf
 from rdsl.runtime.scene.xml import read_scene
-
-CBOX = Path(__file__).resolve().parents[1].parent / "shared" / "scenes" / "cbox" / "cbox.xml"
 
 
 def write(path: Path, *lines: str) -> Path:
