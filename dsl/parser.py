@@ -27,7 +27,7 @@ _GRAMMAR = Path(__file__).with_name("grammar.lark")
 
 # float32 rounds to infinity from FLT_MAX + half an ulp, and to zero below half the smallest
 # subnormal (2^-150); a literal out there would change meaning silently, as C compilers warn
-_F32_OVERFLOW = 2.0**128 * (1.0 - 2.0**-25)
+F32_OVERFLOW = 2.0**128 * (1.0 - 2.0**-25)
 _F32_UNDERFLOW = 2.0**-150
 
 
@@ -372,7 +372,7 @@ class _ToAst(Transformer):
     def float_lit(self, meta, ch):
         tok = ch[0]
         value = float(str(tok))
-        if abs(value) >= _F32_OVERFLOW:
+        if abs(value) >= F32_OVERFLOW:
             raise CompileError(Diagnostic(self._tloc(tok), f"`{tok}` is too large for a Float "
                                           "(the largest is 3.4028235e+38)"))
         if 0.0 < abs(value) < _F32_UNDERFLOW or (value == 0.0 and _nonzero_digits(str(tok))):
