@@ -73,3 +73,65 @@ def test_mask_with_a_textured_opacity(tmp_path, opacity):
     check(scene(tmp_path, f"""<shape type="rectangle"><bsdf type="mask">{tex}
         <bsdf type="diffuse"><spectrum name="reflectance" value="0.2"/></bsdf>
         </bsdf></shape>"""))
+
+
+# ------------------------------------------------- anisotropic roughness and the dp/du frame
+def _grid_obj(tmp_path: Path, n: int = 10) -> Path:
+    """A bumpy height field with per-vertex normals and uvs rotated by 35 degrees from x, y
+    (so the frame from dp/du differs from any frame built from the normal alone)."""
+    xs = np.linspace(-1.0, 1.0, n)
+    c, s = np.cos(np.radians(35.0)), np.sin(np.radians(35.0))
+    v, vt, vn, f = [], [], [], []
+    for y in xs:
+        for x in xs:
+            z = 0.15 * np.sin(2.5 * x) * np.cos(2.0 * y)
+            v.append(f"v {x} {y} {z}")
+            u0, v0 = (x + 1) / 2, (y + 1) / 2
+            vt.append(f"vt {c * u0 - s * v0} {s * u0 + c * v0}")
+            nn = np.array([-0.375 * np.cos(2.5 * x) * np.cos(2.0 * y),
+                           0.3 * np.sin(2.5 * x) * np.sin(2.0 * y), 1.0])
+            vn.append("vn {} {} {}".format(*(nn / np.linalg.norm(nn))))
+    for j in range(n - 1):
+        for i in range(n - 1):
+            a = j * n + i + 1
+            b, cc, d = a + 1, a + n, a + n + 1
+            f += [f"f {a}/{a}/{a} {b}/{b}/{b} {d}/{d}/{d}",
+                  f"f {a}/{a}/{a} {d}/{d}/{d} {cc}/{cc}/{cc}"]
+    path = tmp_path / "grid.obj"
+    path.write_text("\n".join(v + vt + vn + f) + "\n")
+    return path
+
+
+ANISO_SHAPES = {
+    "obj_with_uvs": lambda tmp: ('<shape type="obj"><string name="filename" '
+                                 f'value="{_grid_obj(tmp)}"/>'),
+    "rectangle": lambda tmp: ('<shape type="rectangle"><transform name="to_world">'
+                              '<rotate z="1" angle="30"/></transform>'),
+    "disk": lambda tmp: ('<shape type="disk"><transform name="to_world">'
+                         '<rotate z="1" angle="30"/></transform>'),
+}
+
+
+@pytest.mark.parametrize("shape", sorted(ANISO_SHAPES))
+def test_anisotropic_roughconductor_follows_dp_du(tmp_path, shape):
+    """alpha_u runs along the surface's dp/du, as in Mitsuba (the shading frame was
+    coordinate_system(n): a highlight of another shape and orientation)."""
+    path = tmp_path / "aniso.xml"
+    path.write_text(f"""<scene version="3.0.0">
+  <integrator type="path"><integer name="max_depth" value="3"/></integrator>
+  <sensor type="perspective"><float name="fov" value="45"/>
+    <transform name="to_world"><lookat origin="0.3, -2.2, 2.6" target="0, 0, 0" up="0, 0, 1"/>
+    </transform>
+    <film type="hdrfilm"><integer name="width" value="32"/><integer name="height" value="32"/>
+      <rfilter type="box"/></film></sensor>
+  {ANISO_SHAPES[shape](tmp_path)}
+    <bsdf type="roughconductor"><string name="material" value="Al"/>
+      <float name="alpha_u" value="0.04"/><float name="alpha_v" value="0.4"/></bsdf>
+  </shape>
+  <shape type="sphere">
+    <transform name="to_world"><scale value="0.4"/><translate x="-0.6" y="2" z="2"/></transform>
+    <emitter type="area"><rgb name="radiance" value="20, 20, 20"/></emitter>
+  </shape>
+  <emitter type="constant"><rgb name="radiance" value="0.05, 0.05, 0.05"/></emitter>
+</scene>""")
+    check(path)
