@@ -135,3 +135,71 @@ def test_anisotropic_roughconductor_follows_dp_du(tmp_path, shape):
   <emitter type="constant"><rgb name="radiance" value="0.05, 0.05, 0.05"/></emitter>
 </scene>""")
     check(path)
+
+
+# ------------------------------------------------------------------------------ blendbsdf
+BLEND_SCENE = """<scene version="3.0.0">
+  <integrator type="path"><integer name="max_depth" value="2"/></integrator>
+  <sensor type="perspective"><float name="fov" value="35"/>
+    <transform name="to_world"><lookat origin="0, 0, 4" target="0, 0, 0" up="0, 1, 0"/>
+    </transform>
+    <film type="hdrfilm"><integer name="width" value="32"/><integer name="height" value="32"/>
+      <rfilter type="box"/></film></sensor>
+  <shape type="sphere"><transform name="to_world"><rotate x="1" angle="20"/></transform>
+    {bsdf}</shape>
+  <shape type="sphere"><transform name="to_world"><scale value="0.3"/>
+    <translate x="1.2" y="1.2" z="1.5"/></transform>
+    <emitter type="area"><rgb name="radiance" value="30, 30, 30"/></emitter></shape>
+  <emitter type="constant"><rgb name="radiance" value="0.2, 0.2, 0.2"/></emitter>
+</scene>"""
+ROUGH_AU = ('<bsdf type="roughconductor"><string name="material" value="Au"/>'
+            '<float name="alpha" value="0.2"/></bsdf>')
+SMOOTH_CU = '<bsdf type="conductor"><string name="material" value="Cu"/></bsdf>'
+ROUGH_CU = ('<bsdf type="roughconductor"><string name="material" value="Cu"/>'
+            '<float name="alpha" value="0.05"/></bsdf>')
+
+
+def test_blendbsdf_of_rough_and_smooth_conductors_is_the_weighted_mean(tmp_path):
+    """blendbsdf(x, y, w) is (1 - w) x + w y.  With max_depth 2 the sphere's BSDF is met
+    once per path, so the image is (1 - w) image(x) + w image(y) exactly; those two are
+    rendered by Mitsuba, whose single BSDFs are unbiased.  (Mitsuba's own blendbsdf of a
+    rough and a smooth BSDF is not: its sample() returns the chosen BSDF's pdf, while its
+    pdf() and the emitter-sampling MIS weight use the mixture's (1 - w) p_rough, so the two
+    MIS weights of the rough lobe sum to more than 1: 0.06 RMSE of bias here, green +4%,
+    blue -6%.  rdsl returns the mixture's pdf from sample() too, and converges to the mean.)"""
+    from _mitsuba_compare import mitsuba_render
+    from rdsl.runtime.render.renderer import load_scene
+
+    w = 0.3
+    paths = {}
+    for name, bsdf in (("x", ROUGH_AU), ("y", SMOOTH_CU), ("blend", (
+            f'<bsdf type="blendbsdf"><float name="weight" value="{w}"/>{ROUGH_AU}{SMOOTH_CU}'
+            '</bsdf>'))):
+        paths[name] = tmp_path / f"{name}.xml"
+        paths[name].write_text(BLEND_SCENE.format(bsdf=bsdf))
+    truth = ((1 - w) * mitsuba_render(paths["x"], 2048, seed=1)
+             + w * mitsuba_render(paths["y"], 2048, seed=2))
+    spp, mine, noise = 128, [], []
+    for seed in (0, 1):
+        img = np.asarray(load_scene(paths["blend"]).render(spp=spp, seed=seed), np.float64)
+        mine.append(img[..., :3])
+        same_spp = ((1 - w) * mitsuba_render(paths["x"], spp, seed=10 + seed)
+                    + w * mitsuba_render(paths["y"], spp, seed=20 + seed))
+        noise.append(np.sqrt(np.mean((same_spp - truth) ** 2)))
+    err = [np.sqrt(np.mean((m - truth) ** 2)) for m in mine]
+    assert np.mean(err) <= 1.5 * np.mean(noise), (err, noise)
+    np.testing.assert_allclose(np.mean(mine, axis=0).mean(axis=(0, 1)),
+                               truth.mean(axis=(0, 1)), rtol=0.02)
+
+
+def test_blendbsdf_with_a_textured_weight(tmp_path):
+    """Two rough conductors blended by a checkerboard, against Mitsuba's own blendbsdf: with
+    two rough lobes its MIS mismatch is small (0.0096 RMSE against the weighted mean of the
+    two BSDFs' images at 4096 spp, about that reference's own noise)."""
+    tex = ('<texture type="checkerboard" name="weight"><float name="color0" value="0.1"/>'
+           '<float name="color1" value="0.8"/><transform name="to_uv"><scale value="3"/>'
+           '</transform></texture>')
+    path = tmp_path / "blend.xml"
+    path.write_text(BLEND_SCENE.format(
+        bsdf=f'<bsdf type="blendbsdf">{tex}{ROUGH_AU}{ROUGH_CU}</bsdf>'))
+    check(path, spp=64)
