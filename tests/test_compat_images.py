@@ -203,3 +203,29 @@ def test_blendbsdf_with_a_textured_weight(tmp_path):
     path.write_text(BLEND_SCENE.format(
         bsdf=f'<bsdf type="blendbsdf">{tex}{ROUGH_AU}{ROUGH_CU}</bsdf>'))
     check(path, spp=64)
+
+
+# ------------------------------------------------------------------------------- twosided
+@pytest.mark.parametrize("origin", ["-3.5, 2.0, 3.0", "-1.0, 3.5, 1.5", "0, 0, -3.9"])
+def test_twosided_cornell_box_seen_from_outside(tmp_path, origin):
+    """The Cornell box with every diffuse wrapped in twosided, seen from outside (the walls'
+    backs; from above, with the ceiling gone, the light's back), under a grey environment."""
+    import re
+
+    from _scenes import CBOX
+
+    s = CBOX.read_text()
+    for c in ("white", "green", "red"):
+        s = re.sub(rf'<bsdf type="diffuse" id="{c}">(.*?)</bsdf>',
+                   rf'<bsdf type="twosided" id="{c}"><bsdf type="diffuse">\1</bsdf></bsdf>', s,
+                   flags=re.S)
+    if origin.startswith("-1.0"):
+        s = re.sub(r'<shape type="rectangle" id="ceiling">.*?</shape>', "", s, flags=re.S)
+    s = (s.replace('origin="0, 0, 3.9"', f'origin="{origin}"')
+         .replace('name="res" value="256"', 'name="res" value="32"')
+         .replace("</scene>", '<emitter type="constant"><rgb name="radiance" '
+                  'value="0.5, 0.5, 0.5"/></emitter></scene>'))
+    assert s.count('type="twosided"') == 3
+    path = tmp_path / "cbox_outside.xml"
+    path.write_text(s)
+    check(path)
