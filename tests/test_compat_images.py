@@ -17,20 +17,23 @@ Image = pytest.importorskip("PIL.Image")
 RATIO = 1.2
 
 
-def scene(tmp_path: Path, body: str, res: int = 32, name: str = "scene.xml",
-          max_depth: int = 4) -> Path:
+def header(max_depth: int = 4, fov: float = 40, origin: str = "0, 0, 4", up: str = "0, 1, 0",
+           res: int = 32) -> str:
+    """A scene's path tracer and a camera looking at the origin, a box filter."""
+    return f"""<scene version="3.0.0">
+  <integrator type="path"><integer name="max_depth" value="{max_depth}"/></integrator>
+  <sensor type="perspective"><float name="fov" value="{fov}"/>
+    <transform name="to_world"><lookat origin="{origin}" target="0, 0, 0" up="{up}"/>
+    </transform>
+    <film type="hdrfilm"><integer name="width" value="{res}"/>
+      <integer name="height" value="{res}"/><rfilter type="box"/></film></sensor>"""
+
+
+def scene(tmp_path: Path, body: str, name: str = "scene.xml") -> Path:
     """A camera at z = 4 looking at the unit rectangle (``body``) in front of a grey diffuse
     wall, under a white constant environment."""
     path = tmp_path / name
-    path.write_text(f"""<scene version="3.0.0">
-  <integrator type="path"><integer name="max_depth" value="{max_depth}"/></integrator>
-  <sensor type="perspective">
-    <float name="fov" value="40"/>
-    <transform name="to_world"><lookat origin="0, 0, 4" target="0, 0, 0" up="0, 1, 0"/>
-    </transform>
-    <film type="hdrfilm"><integer name="width" value="{res}"/>
-      <integer name="height" value="{res}"/><rfilter type="box"/></film>
-  </sensor>
+    path.write_text(f"""{header()}
   {body}
   <shape type="rectangle">
     <transform name="to_world"><scale value="3"/><translate z="-1"/></transform>
@@ -117,13 +120,7 @@ def test_anisotropic_roughconductor_follows_dp_du(tmp_path, shape):
     """alpha_u runs along the surface's dp/du, as in Mitsuba (the shading frame was
     coordinate_system(n): a highlight of another shape and orientation)."""
     path = tmp_path / "aniso.xml"
-    path.write_text(f"""<scene version="3.0.0">
-  <integrator type="path"><integer name="max_depth" value="3"/></integrator>
-  <sensor type="perspective"><float name="fov" value="45"/>
-    <transform name="to_world"><lookat origin="0.3, -2.2, 2.6" target="0, 0, 0" up="0, 0, 1"/>
-    </transform>
-    <film type="hdrfilm"><integer name="width" value="32"/><integer name="height" value="32"/>
-      <rfilter type="box"/></film></sensor>
+    path.write_text(f"""{header(3, 45, "0.3, -2.2, 2.6", "0, 0, 1")}
   {ANISO_SHAPES[shape](tmp_path)}
     <bsdf type="roughconductor"><string name="material" value="Al"/>
       <float name="alpha_u" value="0.04"/><float name="alpha_v" value="0.4"/></bsdf>
@@ -138,13 +135,7 @@ def test_anisotropic_roughconductor_follows_dp_du(tmp_path, shape):
 
 
 # ------------------------------------------------------------------------------ blendbsdf
-BLEND_SCENE = """<scene version="3.0.0">
-  <integrator type="path"><integer name="max_depth" value="2"/></integrator>
-  <sensor type="perspective"><float name="fov" value="35"/>
-    <transform name="to_world"><lookat origin="0, 0, 4" target="0, 0, 0" up="0, 1, 0"/>
-    </transform>
-    <film type="hdrfilm"><integer name="width" value="32"/><integer name="height" value="32"/>
-      <rfilter type="box"/></film></sensor>
+BLEND_SCENE = header(2, 35).replace("{", "{{").replace("}", "}}") + """
   <shape type="sphere"><transform name="to_world"><rotate x="1" angle="20"/></transform>
     {bsdf}</shape>
   <shape type="sphere"><transform name="to_world"><scale value="0.3"/>
@@ -218,9 +209,9 @@ def test_twosided_cornell_box_seen_from_outside(tmp_path, origin):
     for c in ("white", "green", "red"):
         s = re.sub(rf'<bsdf type="diffuse" id="{c}">(.*?)</bsdf>',
                    rf'<bsdf type="twosided" id="{c}"><bsdf type="diffuse">\1</bsdf></bsdf>', s,
-                   flags=re.S)
+                   flags=re.DOTALL)
     if origin.startswith("-1.0"):
-        s = re.sub(r'<shape type="rectangle" id="ceiling">.*?</shape>', "", s, flags=re.S)
+        s = re.sub(r'<shape type="rectangle" id="ceiling">.*?</shape>', "", s, flags=re.DOTALL)
     s = (s.replace('origin="0, 0, 3.9"', f'origin="{origin}"')
          .replace('name="res" value="256"', 'name="res" value="32"')
          .replace("</scene>", '<emitter type="constant"><rgb name="radiance" '
