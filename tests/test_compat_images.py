@@ -78,6 +78,19 @@ def test_mask_with_a_textured_opacity(tmp_path, opacity):
         </bsdf></shape>"""))
 
 
+def test_mask_over_a_blend_two_textured_weights(tmp_path):
+    """Two terms and the pass-through, each with a textured factor (the pass-through's was
+    read from a slot no term had written)."""
+    check(scene(tmp_path, f"""<shape type="rectangle"><bsdf type="mask">
+        <texture type="bitmap" name="opacity"><string name="filename"
+            value="{_stripes(tmp_path, "L")}"/></texture>
+        <bsdf type="blendbsdf"><texture type="checkerboard" name="weight">
+            <float name="color0" value="0.1"/><float name="color1" value="0.9"/></texture>
+          <bsdf type="diffuse"><rgb name="reflectance" value="0.7, 0.2, 0.1"/></bsdf>
+          <bsdf type="roughconductor"><float name="alpha" value="0.3"/></bsdf></bsdf>
+        </bsdf></shape>"""))
+
+
 # ------------------------------------------------- anisotropic roughness and the dp/du frame
 def _grid_obj(tmp_path: Path, n: int = 10) -> Path:
     """A bumpy height field with per-vertex normals and uvs rotated by 35 degrees from x, y
