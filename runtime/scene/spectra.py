@@ -70,6 +70,20 @@ def spectrum_to_srgb(wavelengths, values, bounded: bool = True) -> tuple[float, 
 _NUM_SPLIT = re.compile(r"[,\s]+")
 
 
+# colours Mitsuba's rgb variants leave unbounded (a conductor's complex index of refraction)
+UNBOUNDED = ("eta", "k")
+
+
+def as_reflectance(color: Color, name: str) -> Color:
+    """Wavelength:value pairs (or an .spd file) that set ``name`` outside an emitter, as
+    Mitsuba 3's rgb variants take them: seen under D65 and clamped to [0, 1] (``eta`` and
+    ``k`` only at 0).  The pairs stay for the spectral variants."""
+    wl, v = np.asarray(color.wavelengths, np.float64), np.asarray(color.values, np.float64)
+    rgb = (spectral.spectrum_to_rgb_unbounded(wl, v) if name in UNBOUNDED
+           else spectral.spectrum_to_rgb_reflectance(wl, v))
+    return Color((float(rgb[0]), float(rgb[1]), float(rgb[2])), color.wavelengths, color.values)
+
+
 def parse_float(tok: str, what: str, loc: Loc) -> float:
     """``float(tok)`` (a ValueError if it is no number), which must fit the kernels' 32-bit
     Float: a finite number that would become infinity there is an error at ``loc``."""
