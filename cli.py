@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import argparse
 import sys
+import warnings
 from collections.abc import Callable
 from typing import Any
 
@@ -29,12 +30,25 @@ def parser() -> tuple[argparse.ArgumentParser, dict[str, Callable[[Any], int]]]:
     return p, commands
 
 
+def _show_warning(message, category, filename, lineno, file=None, line=None) -> None:
+    """A warning about the user's input (a UserWarning: its message names their file and
+    line) prints as ``warning: ...``, not with the line of rdsl's code that raised it."""
+    if not issubclass(category, UserWarning):
+        return _default_show_warning(message, category, filename, lineno, file, line)
+    print(f"warning: {message}", file=sys.stderr if file is None else file)
+
+
+_default_show_warning = warnings.showwarning
+
+
 def main(argv: list[str] | None = None) -> int:
     """Run one ``rdsl`` subcommand; returns the exit status."""
     p, commands = parser()
     args = p.parse_args(argv)
     try:
-        return commands[args.cmd](args)
+        with warnings.catch_warnings():
+            warnings.showwarning = _show_warning
+            return commands[args.cmd](args)
     except CompileError as e:
         print(e.format(), file=sys.stderr)
         return 1

@@ -26,7 +26,7 @@ from pathlib import Path
 import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
-DEFAULT_SCENE = ROOT.parent / "shared" / "scenes" / "cbox" / "cbox.xml"
+DEFAULT_SCENE = ROOT / "examples" / "cbox" / "cbox.xml"
 os.environ.setdefault("DRJIT_LIBLLVM_PATH", "/usr/lib/x86_64-linux-gnu/libLLVM.so.19.1")
 
 

@@ -28,7 +28,7 @@ from pathlib import Path
 import rdsl
 
 ROOT = Path(__file__).resolve().parents[1]
-CBOX = ROOT.parent / "shared" / "scenes" / "cbox" / "cbox.xml"
+CBOX = ROOT / "examples" / "cbox" / "cbox.xml"
 STDLIB = ROOT / "stdlib"
 ORENNAYAR = ROOT / "examples" / "plugins" / "orennayar.rdsl"
 
@@ -75,8 +75,6 @@ def main() -> None:
     ap.add_argument("--threads", type=int, default=2)
     ap.add_argument("--target", default="host")
     args = ap.parse_args()
-    if not CBOX.is_file():
-        raise SystemExit(f"{CBOX}: the shared scenes are not next to this checkout")
     with tempfile.TemporaryDirectory() as tmp:
         scenes = {name: rdsl.load_scene(path, target=args.target, res=args.res)
                   for name, path in write_scenes(Path(tmp)).items()}

@@ -23,7 +23,7 @@ from pathlib import Path
 import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
-SCENES = [ROOT.parent / "shared" / "scenes" / "cbox" / "cbox.xml",
+SCENES = [ROOT / "examples" / "cbox" / "cbox.xml",
           ROOT / "bench" / "scenes" / "materials.xml"]
 os.environ.setdefault("DRJIT_LIBLLVM_PATH", "/usr/lib/x86_64-linux-gnu/libLLVM.so.19.1")
 

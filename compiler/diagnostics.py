@@ -76,3 +76,23 @@ class CompileError(Exception):
 def error(message: str, loc: Loc | None = None) -> CompileError:
     """Shorthand: ``raise error("bad thing", ins.loc)``."""
     return CompileError([Diagnostic(loc, message)])
+
+
+def read_source_file(path: Path) -> str:
+    """The text of a ``.rdsl`` file.  A file that cannot be read is an error naming it; one
+    that is not UTF-8 is an error at its first bad byte's line and column (the column counts
+    the characters before it on its line, as the parser's columns do)."""
+    try:
+        data = path.read_bytes()
+    except OSError as e:
+        raise CompileError(f"cannot read `{path}`: {e.strerror or e}") from None
+    try:
+        return data.decode("utf-8")
+    except UnicodeDecodeError as e:
+        start = data.rfind(b"\n", 0, e.start) + 1
+        line = data.count(b"\n", 0, e.start) + 1
+        col = len(data[start:e.start].decode("utf-8", errors="replace")) + 1
+        _SOURCES[str(path)] = data.decode("utf-8", errors="replace")
+        loc = Loc(str(path), line, col)
+        raise CompileError(Diagnostic(loc, f"the file is not UTF-8 from here: byte 0x{data[e.start]:02x} "
+                                           f"({e.reason})")) from None

@@ -8,7 +8,7 @@ import re
 from collections.abc import Iterable
 from pathlib import Path
 
-from .diagnostics import CompileError
+from .diagnostics import read_source_file
 
 STDLIB = Path(__file__).resolve().parent.parent / "stdlib"
 PRELUDE = ("types", "math")
@@ -39,11 +39,7 @@ def read_source(source_or_path: str | os.PathLike) -> tuple[str, Path | None]:
     if not is_path(source_or_path):
         return str(source_or_path), None
     path = Path(source_or_path)
-    try:
-        return path.read_text(), path
-    except (OSError, UnicodeDecodeError) as e:
-        why = e.strerror if isinstance(e, OSError) and e.strerror else e
-        raise CompileError(f"cannot read `{path}`: {why}") from None
+    return read_source_file(path), path
 
 
 def source_files(source_or_path: str | Path, search_paths: Iterable[str | Path] = (), *,

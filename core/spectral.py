@@ -461,6 +461,12 @@ def spectrum_to_rgb_reflectance(lam: np.ndarray, values: np.ndarray) -> np.ndarr
     return np.clip(_list_to_srgb(lam, values, under_d65=True), 0.0, 1.0)
 
 
+def spectrum_to_rgb_unbounded(lam: np.ndarray, values: np.ndarray) -> np.ndarray:
+    """As :func:`spectrum_to_rgb_reflectance` but only clamped below at 0: what an RGB
+    variant makes of a conductor's ``eta`` or ``k`` given as pairs (under D65, unbounded)."""
+    return np.maximum(_list_to_srgb(lam, values, under_d65=True), 0.0)
+
+
 def spectrum_to_rgb_emission(lam: np.ndarray, values: np.ndarray) -> np.ndarray:
     """The linear sRGB an RGB variant uses for a ``<spectrum>`` of pairs given as a radiance.
 

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from ..compiler.diagnostics import read_source_file
 from . import ast as A
 from .parser import parse
 from .program import ModuleInfo
@@ -29,11 +30,7 @@ class Loader:
 
     def load_path(self, path: Path, is_main: bool = False) -> ModuleInfo:
         key = str(path.resolve())
-        try:
-            text = path.read_text()
-        except (OSError, UnicodeDecodeError) as e:
-            raise err(f"cannot read `{path}`: {e}", None) from None
-        return self.load_text(text, str(path), key, is_main)
+        return self.load_text(read_source_file(path), str(path), key, is_main)
 
     def load_text(self, text: str, filename: str, key: str, is_main: bool) -> ModuleInfo:
         if key in self.modules:

@@ -25,6 +25,17 @@ from . import ast as A
 _GRAMMAR = Path(__file__).with_name("grammar.lark")
 
 
+# float32 rounds to infinity from FLT_MAX + half an ulp, and to zero below half the smallest
+# subnormal (2^-150); a literal out there would change meaning silently, as C compilers warn
+F32_OVERFLOW = 2.0**128 * (1.0 - 2.0**-25)
+_F32_UNDERFLOW = 2.0**-150
+
+
+def _nonzero_digits(text: str) -> bool:
+    """Whether a literal's mantissa has a nonzero digit (``1e-400`` is 0.0 in float64 too)."""
+    return any(c in "123456789" for c in text.lower().split("e")[0])
+
+
 class _Remember(PostLex):
     """Pass tokens through, remembering the last one (to place "expected `;`" after it)."""
 
@@ -360,7 +371,14 @@ class _ToAst(Transformer):
 
     def float_lit(self, meta, ch):
         tok = ch[0]
-        return A.FloatLit(self._tloc(tok), float(str(tok)), str(tok))
+        value = float(str(tok))
+        if abs(value) >= F32_OVERFLOW:
+            raise CompileError(Diagnostic(self._tloc(tok), f"`{tok}` is too large for a Float "
+                                          "(the largest is 3.4028235e+38)"))
+        if 0.0 < abs(value) < _F32_UNDERFLOW or (value == 0.0 and _nonzero_digits(str(tok))):
+            raise CompileError(Diagnostic(self._tloc(tok), f"`{tok}` is too small for a Float: "
+                                          "it would be 0 (the smallest is 1.4e-45)"))
+        return A.FloatLit(self._tloc(tok), value, str(tok))
 
     def bool_lit(self, meta, ch):
         return A.BoolLit(self._tloc(ch[0]), str(ch[0]) == "true")

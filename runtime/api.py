@@ -92,6 +92,16 @@ class Module:
         return (f"<rdsl.Module {self.path or ''} target={self.target} width={self.width} "
                 f"kernels=[{', '.join(self.kernels)}]>")
 
+    @property
+    def traces_rays(self) -> bool:
+        """Whether the kernels query rays (and so need :meth:`bind_scene`): specialization
+        removes every query from, e.g., a path tracer with ``max_depth`` 0."""
+        try:
+            ctypes.c_void_p.in_dll(self._lib, "rdsl_embree_scene")
+        except ValueError:
+            return False
+        return True
+
     def bind_scene(self, scene: Any) -> None:
         """Point the library's ray queries (`trace`, `occluded`) at an Embree scene (an
         :class:`rdsl.runtime.embree.EmbreeScene`); kept alive as long as this module."""

@@ -15,9 +15,9 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from _scenes import CBOX
 
 ROOT = Path(__file__).resolve().parents[1]
-CBOX = ROOT.parent / "shared" / "scenes" / "cbox" / "cbox.xml"
 MATERIALS = ROOT / "bench" / "scenes" / "materials.xml"
 TABLE = Path(__file__).with_name("golden") / "images" / "hashes.json"
 TARGETS = ("avx512", "avx2")

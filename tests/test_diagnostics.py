@@ -262,6 +262,19 @@ CASES = [
     ('dup_plugin',
      'texture a {\n    fn eval(si: Surface) -> Spectrum { return Spectrum(0.0); }\n}\ntexture a {\n    fn eval(si: Surface) -> Spectrum { return Spectrum(0.0); }\n}\n',
      4, 9, 'duplicate definition of plugin `a`'),
+    # a literal float32 cannot hold is not silently infinity or zero (clang warns on both)
+    ('float_overflow',
+     'fn f(x: Float) -> Float {\n    return x * 1.0e99999;\n}\n',
+     2, 16, '`1.0e99999` is too large for a Float'),
+    ('float_overflow_f32_only',
+     'fn f(x: Float) -> Float {\n    return x * -3.5e38;\n}\n',
+     2, 17, '`3.5e38` is too large for a Float'),
+    ('float_underflow',
+     'fn f(x: Float) -> Float {\n    return x * 1e-46;\n}\n',
+     2, 16, '`1e-46` is too small for a Float: it would be 0'),
+    ('float_underflow_f64_too',
+     'fn f(x: Float) -> Float {\n    return x * 2.5e-400;\n}\n',
+     2, 16, '`2.5e-400` is too small for a Float: it would be 0'),
 ]
 
 
@@ -335,3 +348,26 @@ def test_duplicate_across_files(tmp_path: Path) -> None:
     d = info.value.diagnostics[0]
     assert "duplicate definition of `g(Float) -> Float`" in d.message
     assert d.loc.line == 2 and d.loc.col == 4
+
+
+@pytest.mark.parametrize("text", ["3.4028235e38", "3.40282356e38", "1.4e-45", "0.0e-999", "0e5"])
+def test_float_literals_at_the_ends_of_float32_are_accepted(text: str) -> None:
+    """FLT_MAX and values rounding to it, the smallest subnormal, and zero spelled oddly."""
+    compile_to_ir(f"fn f(x: Float) -> Float {{ return x * {text}; }}\n", filename="ok.rdsl")
+
+
+@pytest.mark.parametrize("imported", [False, True])
+def test_a_file_that_is_not_utf8_points_at_its_first_bad_byte(tmp_path: Path,
+                                                               imported: bool) -> None:
+    bad = tmp_path / ("lib.rdsl" if imported else "main.rdsl")
+    # two-byte characters before the bad byte: the column counts characters, not bytes
+    bad.write_bytes("fn g() -> Float { return 1.0; }\n// \u00e9t\u00e9 ".encode() + b"\xe9t\n")
+    main = tmp_path / "main.rdsl"
+    if imported:
+        main.write_text("import lib;\nfn f() -> Float { return g(); }\n")
+    with pytest.raises(CompileError) as info:
+        compile_to_ir(main)
+    d = info.value.diagnostics[0]
+    assert "not UTF-8" in d.message and "0xe9" in d.message
+    assert (d.loc.file, d.loc.line, d.loc.col) == (str(bad), 2, 8), d.format()
+    assert str(info.value).splitlines()[2].index("^") == 4 + 8 - 1

@@ -13,11 +13,11 @@ import pytest
 
 pytest.importorskip("rdsl.runtime.embree")
 
+from _scenes import CBOX
 from rdsl.cli import main
 from rdsl.runtime.render.renderer import load_scene
 from test_scene_bsdfs import BSDFS, OBLIQUE, scene_xml
 
-CBOX = Path(__file__).resolve().parents[2] / "shared" / "scenes" / "cbox" / "cbox.xml"
 needs_cbox = pytest.mark.skipif(not CBOX.is_file(), reason=f"needs {CBOX}")
 
 

@@ -17,10 +17,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 import rdsl
+from _scenes import CBOX
 from rdsl.compiler.diagnostics import CompileError
 
 ROOT = Path(__file__).resolve().parents[1]
-CBOX = ROOT.parent / "shared" / "scenes" / "cbox" / "cbox.xml"
 AO = ROOT / "examples" / "plugins" / "ao.rdsl"
 HEADER = '<scene version="3.0.0">\n'
 

@@ -14,10 +14,10 @@ import warnings
 from pathlib import Path
 
 import pytest
+from _scenes import CBOX
 from rdsl.core.color import MODELS
 
 ROOT = Path(__file__).resolve().parents[1]
-CBOX = ROOT.parent / "shared" / "scenes" / "cbox" / "cbox.xml"
 MATERIALS = ROOT / "bench" / "scenes" / "materials.xml"
 GOLDEN = Path(__file__).with_name("golden") / "kernel_source"
 

@@ -26,6 +26,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import rdsl
+from _scenes import CBOX
 from rdsl.compiler.build import Build
 from rdsl.compiler.diagnostics import CompileError
 from rdsl.compiler.driver import frontend, pipeline, run_passes
@@ -242,7 +243,7 @@ def test_depolarizing_scene_compiles_to_the_mono_kernel(tmp_path):
 
     from rdsl.compiler.driver import compile_kernels
 
-    cbox = Path(__file__).resolve().parents[2] / "shared" / "scenes" / "cbox" / "cbox.xml"
+    cbox = CBOX
     if not cbox.is_file():
         pytest.skip(f"{cbox} is not present")
     pytest.importorskip("rdsl.runtime.embree")

@@ -2,17 +2,14 @@
 
 from __future__ import annotations
 
-import os
 import shutil
 import subprocess
 import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
+from _scenes import CBOX
 
-SCENES = Path(__file__).resolve().parent.parent.parent / "shared" / "scenes"
-CBOX = SCENES / "cbox" / "cbox.xml"
 pytestmark = pytest.mark.skipif(not CBOX.is_file(), reason=f"{CBOX} is not present")
 
 embree = pytest.importorskip("rdsl.runtime.embree")

@@ -12,11 +12,11 @@ import io
 import math
 import struct
 import zlib
-from pathlib import Path
 
 import numpy as np
 import pytest
 import rdsl
+from _scenes import CBOX
 from rdsl.runtime.render import (
     Progress,
     camera_uniforms,
@@ -33,7 +33,6 @@ from rdsl.runtime.render import (
 from rdsl.runtime.render.film import FILTERS, border_size, filter_radius
 from rdsl.runtime.scene import load_scene_description
 
-CBOX = Path(__file__).resolve().parents[1].parent / "shared" / "scenes" / "cbox" / "cbox.xml"
 CBOX_REF = CBOX.with_name("cbox_ref_rgb.exr")
 needs_cbox = pytest.mark.skipif(not CBOX.is_file(), reason=f"needs {CBOX}")
 

@@ -5,15 +5,15 @@ from __future__ import annotations
 
 import math
 import struct
+import warnings
 from pathlib import Path
 
 import numpy as np
 import pytest
+from _scenes import CBOX
 from rdsl.runtime.scene import SceneError, load_scene_description, parse_defines, spectra
 from rdsl.runtime.scene import transform as xf
 from rdsl.runtime.scene.xml import read_scene
-
-CBOX = Path(__file__).resolve().parents[1].parent / "shared" / "scenes" / "cbox" / "cbox.xml"
 
 
 def write(path: Path, *lines: str) -> Path:
@@ -35,6 +35,19 @@ def load(path: Path, **kw):
 # The scene's line 1 is <scene ...>, so the body's first line is line 2.
 
 BAD_SCENES = {
+    # a finite number float32 cannot hold would be infinity in the kernels (NaN samples)
+    "rgb_beyond_float32": (['<bsdf type="diffuse" id="d">',
+                            '  <rgb name="reflectance" value="0.5, 1e40, 0.5"/>', '</bsdf>'], 3,
+                           "rgb: 1e40 is too large for a 32-bit float"),
+    "float_beyond_float32": (['<bsdf type="roughconductor" id="d">',
+                              '  <float name="alpha" value="-4e38"/>', '</bsdf>'], 3,
+                             "-4e38 is too large for a 32-bit float"),
+    "spectrum_beyond_float32": (['<emitter type="constant">',
+                                 '  <spectrum name="radiance" value="400:1, 700:3.5e38"/>',
+                                 '</emitter>'], 3, "spectrum: 3.5e38 is too large"),
+    "transform_beyond_float32": (['<shape type="sphere">', '  <transform name="to_world">',
+                                  '    <scale x="1e39"/>', '  </transform>', '</shape>'], 4,
+                                 "attribute x: 1e39 is too large for a 32-bit float"),
     "unclosed_tag": (['<shape type="cube">'], 3, "malformed XML: mismatched tag"),
     "bad_attribute_syntax": (['<shape type=cube/>'], 2, "malformed XML: not well-formed"),
     "unknown_element": (['<camera type="perspective"/>'], 2,
@@ -523,3 +536,36 @@ def test_read_scene_tree_keeps_lines(tmp_path: Path) -> None:
     tree = read_scene(path)
     node = tree.ids["d"]
     assert node.loc.line == 3 and node.props["reflectance"].loc.line == 4
+
+
+@pytest.mark.parametrize("prop,warns", [
+    ('<rgb name="reflectance" value="0.5, 1.25, 0.5"/>', True),
+    ('<spectrum name="reflectance" value="400:0.5, 700:1.5"/>', True),
+    ('<float name="reflectance" value="3"/>', True),
+    ('<rgb name="reflectance" value="1, 1, 1"/>', False),
+    ('<spectrum name="reflectance" value="3.4e38"/>', True),  # the largest float32 is taken
+])
+def test_reflectance_above_one_warns_at_its_line(tmp_path: Path, prop: str, warns: bool):
+    path = scene(tmp_path, '<bsdf type="diffuse" id="d">', "", f"  {prop}", "</bsdf>")
+    with warnings.catch_warnings(record=True) as w:
+        warnings.simplefilter("always")
+        load(path)
+    got = [str(x.message) for x in w if "above 1" in str(x.message)]
+    assert len(got) == warns, got
+    assert all(g.startswith(f"{path}:4: reflectance ") for g in got), got
+
+
+def test_cli_prints_a_scene_warning_without_rdsl_paths(tmp_path: Path, capsys):
+    pytest.importorskip("rdsl.runtime.embree")
+    from rdsl.cli import main
+
+    path = scene(tmp_path, '<shape type="sphere"><bsdf type="diffuse">',
+                 '<rgb name="reflectance" value="1.5"/></bsdf></shape>',
+                 '<emitter type="constant"/>', '<sensor type="perspective"><film type="hdrfilm">',
+                 '<integer name="width" value="4"/><integer name="height" value="4"/>',
+                 '</film></sensor>')
+    assert main(["render", str(path), "--spp", "1", "-o", str(tmp_path / "o.exr"),
+                 "--quiet"]) == 0
+    err = capsys.readouterr().err
+    assert f"warning: {path}:3: reflectance 1.5 is above 1" in err
+    assert "rdsl" not in err.replace(str(tmp_path), "") and "Warning:" not in err, err

@@ -5,8 +5,8 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-
 import rdsl
+from _scenes import CBOX
 from rdsl.compiler.build import Build
 from rdsl.compiler.driver import frontend, run_passes
 from rdsl.compiler.ir import Op
@@ -75,7 +75,7 @@ def test_emitter_sampling_disappears_when_every_bsdf_is_delta(tmp_path):
 
     from rdsl.compiler import driver
 
-    cbox = Path(__file__).resolve().parents[2] / "shared" / "scenes" / "cbox" / "cbox.xml"
+    cbox = CBOX
     if not cbox.is_file():
         pytest.skip(f"{cbox} is not present")
     pytest.importorskip("rdsl.runtime.embree")

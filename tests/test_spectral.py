@@ -13,8 +13,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-
 import rdsl
+from _scenes import CBOX
 from rdsl.compiler.build import Build
 from rdsl.compiler.diagnostics import CompileError
 from rdsl.compiler.driver import frontend, pipeline, run_passes
@@ -223,8 +223,6 @@ def test_spectral_only_code_inside_if_const_compiles_in_rgb():
 # --------------------------------------------------------------------------------------
 # The Cornell box against Mitsuba 3's llvm_ad_spectral reference
 
-SCENES = Path(__file__).resolve().parent.parent.parent / "shared" / "scenes"
-CBOX = SCENES / "cbox" / "cbox.xml"
 # Mitsuba 3's spectral RMSE against its reference at 64 spp (shared/scenes/README.md)
 MITSUBA_SPECTRAL_RMSE_64 = 0.022
 

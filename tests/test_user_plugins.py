@@ -19,6 +19,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import rdsl
+from _scenes import CBOX
 from rdsl.compiler.diagnostics import CompileError
 from rdsl.runtime import plugins as registry
 from rdsl.runtime.scene import SceneError, load_scene_description
@@ -26,7 +27,6 @@ from rdsl.runtime.testkit.chi2 import chi2_directions
 from rdsl.runtime.testkit.harness import Harness, declarations
 
 ROOT = Path(__file__).resolve().parents[1]
-CBOX = ROOT.parent / "shared" / "scenes" / "cbox" / "cbox.xml"
 STDLIB = ROOT / "stdlib"
 EXAMPLES = ROOT / "examples" / "plugins"
 SMALL = {"res": 16, "spp": 2}

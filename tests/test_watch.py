@@ -17,6 +17,7 @@ import pytest
 
 pytest.importorskip("rdsl.runtime.embree")
 
+from _scenes import CBOX
 from rdsl.cli import main
 from rdsl.runtime.render import watch as watch_module
 from rdsl.runtime.render.image import read_exr, write_render
@@ -24,7 +25,6 @@ from rdsl.runtime.render.renderer import RenderCancelled, load_scene
 from rdsl.runtime.render.watch import Watcher, WatchJob, preview_spp
 from rdsl.runtime.scene import meshes
 
-CBOX = Path(__file__).resolve().parents[2] / "shared" / "scenes" / "cbox" / "cbox.xml"
 pytestmark = pytest.mark.skipif(not CBOX.is_file(), reason=f"needs {CBOX}")
 
 GREEN = "0.105421, 0.37798, 0.076425"

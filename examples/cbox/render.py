@@ -1,5 +1,4 @@
-"""Render the Cornell box from ../shared/scenes/cbox/ and compare it with Mitsuba 3's
-reference image.
+"""Render the Cornell box in this folder and compare it with Mitsuba 3's reference image.
 
     python examples/cbox/render.py [--spp 64] [--target host]
 
@@ -17,7 +16,7 @@ import rdsl
 from rdsl.runtime.render.image import read_exr, rmse, write_exr, write_png
 
 ROOT = Path(__file__).resolve().parents[2]
-SCENE = ROOT.parent / "shared" / "scenes" / "cbox" / "cbox.xml"
+SCENE = Path(__file__).resolve().with_name("cbox.xml")
 
 
 def main() -> None:
@@ -26,9 +25,6 @@ def main() -> None:
     ap.add_argument("--target", default="host")
     ap.add_argument("--out", default=str(ROOT / "out" / "cbox.exr"))
     args = ap.parse_args()
-    if not SCENE.is_file():
-        raise SystemExit(f"{SCENE}: the shared scenes are not next to this checkout")
-
     t = time.perf_counter()
     scene = rdsl.load_scene(SCENE, variant="rgb", target=args.target)
     mod = scene.compile()

@@ -193,7 +193,10 @@ def bsdf_instance(plugin: Any, textures: Any = None) -> Instance:
         raise CompileError(f"{_where(plugin)}: masks whose opacities come from different "
                            "textures on different paths of one combinator tree are not "
                            "supported by the renderer yet", plugin.loc)
-    factors = [t.factors for t in terms] + [null[0].factors if null else ()]
+    # the pass-through's factors are term MAX_TERMS's (mixture_factor(4, ...)), whatever
+    # the number of terms
+    factors = ([t.factors for t in terms] + [()] * (MAX_TERMS - len(terms))
+               + [null[0].factors if null else ()])
     params = mixture_params([(k, t.above, t.below, t.mirror) for k, t in enumerate(terms)],
                             sum(t.above for t in null), sum(t.below for t in null))
     params["factors"] = sum(mode << (4 * i + 2 * j) for i, fs in enumerate(factors)

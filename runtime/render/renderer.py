@@ -396,7 +396,8 @@ class Scene:
         spp = int(spp or self.spp)
         seed = self.seed if seed is None else int(seed)
         mod = self.compile()
-        mod.bind_scene(self.embree)
+        if mod.traces_rays:  # a path tracer with max_depth 0 traces none: its image is black
+            mod.bind_scene(self.embree)
         film = film_uniforms(self.desc.sensor.film, 1, channels=len(self.channel_names))
         cells = film["grid_w"] * film["grid_h"]
         batch = max(1, min(spp, BATCH_SAMPLES // max(cells, 1)))

@@ -45,7 +45,7 @@ from .schema import (
     PluginSpec,
     plugin_types,
 )
-from .spectra import Color, conductor_ior, lookup_ior
+from .spectra import Color, as_reflectance, conductor_ior, lookup_ior
 from .xml import Child, ObjectNode, Prop, SceneTree, read_scene
 
 # the largest Cauchy B term accepted (um^2): glasses are below 0.02, so a larger value is a
@@ -310,9 +310,7 @@ class _Builder:
                 raise scene_error(f"<{kind} name=\"{name}\">: a color must be non-negative, "
                                   f"got {value.rgb[0]:g}", loc)
             if node.category != "emitter" and value.wavelengths is not None:
-                # a reflectance spectrum is clamped to [0, 1] (Mitsuba's bounded conversion)
-                return Color(tuple(min(c, 1.0) for c in value.rgb), value.wavelengths,
-                             value.values)
+                return as_reflectance(value, name)  # seen under D65, as Mitsuba's
             return value
         if p.kind == "ior":
             ior = lookup_ior(value, loc) if kind == "string" else float(value)

@@ -20,6 +20,7 @@ import numpy as np
 
 from ...compiler.ir import Loc
 from ...core import spectral
+from ...dsl.parser import F32_OVERFLOW
 from .errors import scene_error
 
 CIE_MIN = 360.0
@@ -69,6 +70,30 @@ def spectrum_to_srgb(wavelengths, values, bounded: bool = True) -> tuple[float, 
 _NUM_SPLIT = re.compile(r"[,\s]+")
 
 
+# colours Mitsuba's rgb variants leave unbounded (a conductor's complex index of refraction)
+UNBOUNDED = ("eta", "k")
+
+
+def as_reflectance(color: Color, name: str) -> Color:
+    """Wavelength:value pairs (or an .spd file) that set ``name`` outside an emitter, as
+    Mitsuba 3's rgb variants take them: seen under D65 and clamped to [0, 1] (``eta`` and
+    ``k`` only at 0).  The pairs stay for the spectral variants."""
+    wl, v = np.asarray(color.wavelengths, np.float64), np.asarray(color.values, np.float64)
+    rgb = (spectral.spectrum_to_rgb_unbounded(wl, v) if name in UNBOUNDED
+           else spectral.spectrum_to_rgb_reflectance(wl, v))
+    return Color((float(rgb[0]), float(rgb[1]), float(rgb[2])), color.wavelengths, color.values)
+
+
+def parse_float(tok: str, what: str, loc: Loc) -> float:
+    """``float(tok)`` (a ValueError if it is no number), which must fit the kernels' 32-bit
+    Float: a finite number that would become infinity there is an error at ``loc``."""
+    v = float(tok)
+    if math.isfinite(v) and abs(v) >= F32_OVERFLOW:
+        raise scene_error(f"{what}: {tok.strip()} is too large for a 32-bit float (the largest "
+                          "is 3.4028235e+38)", loc)
+    return v
+
+
 def parse_numbers(text: str, what: str, loc: Loc) -> list[float]:
     """Split ``"1, 2 3"`` into floats; a bad token is an error at ``loc``."""
     out = []
@@ -76,7 +101,7 @@ def parse_numbers(text: str, what: str, loc: Loc) -> list[float]:
         if not tok:
             continue
         try:
-            out.append(float(tok))
+            out.append(parse_float(tok, what, loc))
         except ValueError:
             raise scene_error(f"{what}: cannot parse {tok!r} as a number (in {text!r})",
                               loc) from None
@@ -129,8 +154,8 @@ def parse_spectrum(text: str, loc: Loc, bounded: bool = True) -> Color:
         if len(parts) != 2:
             raise scene_error(f"spectrum: {pair!r} is not a \"wavelength:value\" pair", loc)
         try:
-            wl.append(float(parts[0]))
-            vals.append(float(parts[1]))
+            wl.append(parse_float(parts[0], "spectrum", loc))
+            vals.append(parse_float(parts[1], "spectrum", loc))
         except ValueError:
             raise scene_error(f"spectrum: cannot parse {pair!r} as \"wavelength:value\"",
                               loc) from None
@@ -155,8 +180,8 @@ def read_spd(path: Path, loc: Loc) -> tuple[list[float], list[float]]:
         try:
             if len(parts) != 2:
                 raise ValueError
-            wl.append(float(parts[0]))
-            vals.append(float(parts[1]))
+            wl.append(parse_float(parts[0], f"spectrum file '{path}' line {n}", loc))
+            vals.append(parse_float(parts[1], f"spectrum file '{path}' line {n}", loc))
         except ValueError:
             raise scene_error(f"spectrum file '{path}' line {n}: expected "
                               f"\"wavelength value\", got {line!r}", loc) from None

@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import math
 import re
+import warnings
 import xml.parsers.expat
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -33,7 +34,15 @@ from . import transform as xf
 from .errors import file_loc, scene_error
 from .reads import first_file, note
 from .refs import UNRESOLVED, resolve_refs
-from .spectra import Color, parse_numbers, parse_rgb, parse_spectrum, read_spd, spectrum_to_srgb
+from .spectra import (
+    Color,
+    parse_float,
+    parse_numbers,
+    parse_rgb,
+    parse_spectrum,
+    read_spd,
+    spectrum_to_srgb,
+)
 
 OBJECT_TAGS = ("shape", "bsdf", "texture", "emitter", "integrator", "sensor", "film",
                "sampler", "rfilter")
@@ -379,7 +388,7 @@ class _Reader:
         value = self.need(el, a, "value")
         if tag == "float":
             try:
-                return float(value)
+                return _warn_above_one(name, parse_float(value, what, el.loc), el.loc)
             except ValueError:
                 raise scene_error(f"{what}: cannot parse '{value}' as a float", el.loc) from None
         if tag == "integer":
@@ -397,10 +406,10 @@ class _Reader:
             return value
         if tag in ("rgb", "spectrum") and _negative(value):
             # an angle (Mitsuba takes polarizer angles as spectra); a color rejects it later
-            return Color.gray(float(value))
+            return Color.gray(parse_float(value, what, el.loc))
         if tag == "rgb":
-            return parse_rgb(value, el.loc)
-        return parse_spectrum(value, el.loc, bounded=False)
+            return _warn_above_one(name, parse_rgb(value, el.loc), el.loc)
+        return _warn_above_one(name, parse_spectrum(value, el.loc, bounded=False), el.loc)
 
     def read_vector(self, el: Element, a: dict[str, str], what: str) -> np.ndarray:
         if "value" in a:
@@ -421,7 +430,7 @@ class _Reader:
         if key not in a:
             return default
         try:
-            return float(a[key])
+            return parse_float(a[key], f"<{el.tag}>: attribute {key}", el.loc)
         except ValueError:
             raise scene_error(f"<{el.tag}>: attribute {key}=\"{a[key]}\" is not a number",
                               el.loc) from None
@@ -486,6 +495,17 @@ class _Reader:
             return xf.look_at(pts["origin"], pts["target"], pts.get("up"))
         except ValueError as e:
             raise scene_error(f"<lookat>: {e}", op.loc) from None
+
+
+def _warn_above_one(name: str, value: Any, loc: Loc) -> Any:
+    """``value``, with a warning at its line when it is a reflectance or transmittance above 1
+    (it makes light: Mitsuba renders it, as rdsl does, but it is rarely what was meant)."""
+    if name.endswith(("reflectance", "transmittance")):
+        vals = (value,) if isinstance(value, float) else (value.values or value.rgb)
+        if max(vals) > 1.0:
+            warnings.warn(f"{loc.file}:{loc.line}: {name} {max(vals):g} is above 1: the "
+                          "surface gives back more light than it receives", stacklevel=2)
+    return value
 
 
 def _negative(text: str) -> bool:
