@@ -14,7 +14,8 @@ import rdsl
 from rdsl.compiler.build import Build
 from rdsl.compiler.diagnostics import CompileError
 
-CBOX = Path(__file__).resolve().parents[2] / "shared" / "scenes" / "cbox" / "cbox.xml"
+from _scenes import CBOX
+
 needs_cbox = pytest.mark.skipif(not CBOX.is_file(), reason=f"needs {CBOX}")
 
 SRC = """

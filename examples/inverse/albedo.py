@@ -22,7 +22,7 @@ import rdsl
 from rdsl.runtime.render.image import write_png
 
 ROOT = Path(__file__).resolve().parents[2]
-SCENE = ROOT.parent / "shared" / "scenes" / "cbox" / "cbox.xml"
+SCENE = ROOT / "examples" / "cbox" / "cbox.xml"
 WALLS = ("red.reflectance", "green.reflectance")
 
 
@@ -102,8 +102,6 @@ def main() -> None:
     ap.add_argument("--lr", type=float, default=0.03)
     ap.add_argument("--out", default=str(ROOT / "out" / "inverse"))
     args = ap.parse_args()
-    if not SCENE.is_file():
-        raise SystemExit(f"{SCENE}: the shared scenes are not next to this checkout")
     recover(args.res, args.spp, args.iterations, args.lr, out=Path(args.out))
 
 
