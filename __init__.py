@@ -1,7 +1,8 @@
 """rdsl: a compiler for physically based rendering.
 
 ``rdsl.jit(source_or_path)`` compiles in process, ``rdsl.load(path)`` loads what
-``rdsl compile`` wrote, ``rdsl.load_scene(path)`` loads a Mitsuba scene for rendering and
+``rdsl compile`` wrote, ``rdsl.load_scene(path)`` loads a Mitsuba scene for rendering
+(``rdsl.load_dict(d)`` one given as Mitsuba 3's Python dictionary) and
 ``rdsl.register_plugin(path_or_source)`` makes a plugin file available to every scene.
 """
 
@@ -15,7 +16,11 @@ def __getattr__(name: str):
         from .runtime import api
 
         return getattr(api, name)
-    if name in ("load_scene", "Scene"):
+    if name == "Transform4f":  # Mitsuba's ScalarTransform4f, for load_dict
+        from .runtime.scene.dicts import Transform4f
+
+        return Transform4f
+    if name in ("load_scene", "load_dict", "Scene"):
         from .runtime.render import renderer
 
         return getattr(renderer, name)

@@ -11,6 +11,7 @@ called from the kernel), shading, light sampling and the film's reconstruction f
 from __future__ import annotations
 
 import hashlib
+import os
 import time
 import warnings
 from collections.abc import Callable
@@ -472,3 +473,28 @@ def load_scene(path: str | Path, variant: str | ColorModel = "rgb",
     build = build or Build.of(target, variant)
     return Scene(path, build, specialize=specialize, triangulate=triangulate,
                  plugins=plugins, **defaults)
+
+
+def load_dict(scene: dict, variant: str | ColorModel = "rgb", target: str | Target = "host",
+              specialize: bool = True, *, build: Build | None = None, plugins: Any = (),
+              **defaults: Any) -> Scene:
+    """Load a scene given as Mitsuba 3's Python dictionary (``mi.load_dict``'s format):
+    written out as XML (runtime/scene/dicts.py) under the kernel cache and loaded as
+    :func:`load_scene` loads a file, user plugins found in the current folder first."""
+    import hashlib as _hashlib
+
+    from ..cache import cache_dir
+    from ..plugins import PluginRegistry
+    from ..scene.dicts import dict_to_xml
+
+    build = build or Build.of(target, variant)
+    places = [Path.cwd(), *plugins]
+    text = dict_to_xml(scene, PluginRegistry.for_scene(None, places))
+    folder = cache_dir() / "dicts"
+    folder.mkdir(parents=True, exist_ok=True)
+    path = folder / f"{_hashlib.sha256(text.encode()).hexdigest()[:20]}.xml"
+    if not path.is_file():
+        tmp = path.with_suffix(f".{os.getpid()}.tmp")
+        tmp.write_text(text)
+        os.replace(tmp, path)
+    return Scene(path, build, specialize=specialize, plugins=places, **defaults)
