@@ -41,6 +41,14 @@ TEMPLATE = Path(__file__).resolve().parents[2] / "stdlib" / "render" / "kernel.r
 # the buffers of a `Scene` (stdlib/render/integrator.rdsl), the kernel's arguments of the
 # same names
 SCENE_BUFFERS = ("P", "N", "UV", "F", "G", "LC", "LT", "T", "EK", "E", "ENV")
+# the scene's sampler -> the `kind` of stdlib/render/integrator.rdsl's Sampler
+SAMPLER_KINDS = {"independent": 0, "stratified": 1}
+
+
+def sampler_kind(sampler: Any) -> int:
+    """The Sampler `kind` of the scene's sampler (a stratified one without jitter: 2)."""
+    kind = SAMPLER_KINDS[sampler.type]
+    return 2 if kind == 1 and sampler.params.get("jitter") is False else kind
 
 
 def literal(value: Any, struct: str | None = None) -> str:
@@ -111,7 +119,7 @@ def _radiance_call(plan: IntegratorPlan, bufs: SceneBuffers) -> str:
     lines = [f"    let scene = Scene {{ {buffers},",
              f"                         nemitter: {bufs.nlight}, env: {bufs.lights.env}, "
              "up: cam.basis.t };",
-             "    let sampler = Sampler { rng: r2 };"]
+             "    let sampler = r2;"]
     radiance, wrapper = plan.radiance, plan.wrapper
     source = plan.aov_source
     if radiance is None:
@@ -204,5 +212,6 @@ def kernel_source(desc: Any, bufs: SceneBuffers, bsdfs: list[Instance],
         "camera": literal(camera_uniforms(desc.sensor), "Camera"),
         "seed_rng": "\n".join(seed_rng),
         "radiance": _radiance_call(plan, bufs),
+        "sampler_kind": str(sampler_kind(desc.sensor.sampler)),
         **_film_holes(film),
     })

@@ -228,6 +228,9 @@ _SPECS = [
     PluginSpec("rfilter", "gaussian", {"stddev": P("float", 0.5)}),
     PluginSpec("sampler", "independent", {"sample_count": P("integer", 4),
                                           "seed": P("integer", 0)}),
+    PluginSpec("sampler", "stratified", {"sample_count": P("integer", 4),
+                                         "seed": P("integer", 0),
+                                         "jitter": P("boolean", True)}),
 ]
 
 SCHEMA: dict[tuple[str, str], PluginSpec] = {(s.category, s.type): s for s in _SPECS}
