@@ -1,4 +1,4 @@
-"""The `stratified` sampler (stdlib/render/sampler.rdsl): a permutation of [0, n) per pixel
+"""The `stratified` and `multijitter` samplers (stdlib/render/sampler.rdsl): a permutation of [0, n) per pixel
 and dimension, unbiased, and a lower error than the independent sampler at equal spp on the
 Cornell box (against Mitsuba 3's reference image)."""
 
@@ -36,14 +36,16 @@ def _scene(tmp_path, sampler: str) -> object:
 def test_stratified_lowers_the_error_on_the_cornell_box(tmp_path):
     ref = read_exr(CBOX.with_name("cbox_ref_rgb.exr"))[..., :3]
     strat = _scene(tmp_path, '<sampler type="stratified">')
+    mj = _scene(tmp_path, '<sampler type="multijitter">')
     errors = {}
-    for name, path in (("independent", CBOX), ("stratified", strat)):
+    for name, path in (("independent", CBOX), ("stratified", strat), ("multijitter", mj)):
         scene = rdsl.load_scene(path, spp=16, res=256)
         images = [scene.render(seed=s) for s in range(2)]
         errors[name] = np.mean([rmse(i, ref) for i in images])
         # unbiased: the mean of the image is the reference's
         assert abs(np.mean(images) - ref.mean()) < 0.01 * ref.mean(), name
     assert errors["stratified"] < 0.85 * errors["independent"], errors
+    assert errors["multijitter"] < 0.85 * errors["independent"], errors
 
 
 def test_stratified_without_jitter_uses_stratum_centres(tmp_path):

@@ -42,13 +42,15 @@ TEMPLATE = Path(__file__).resolve().parents[2] / "stdlib" / "render" / "kernel.r
 # same names
 SCENE_BUFFERS = ("P", "N", "UV", "F", "G", "LC", "LT", "T", "EK", "E", "ENV")
 # the scene's sampler -> the `kind` of stdlib/render/integrator.rdsl's Sampler
-SAMPLER_KINDS = {"independent": 0, "stratified": 1}
+SAMPLER_KINDS = {"independent": 0, "stratified": 1, "multijitter": 3}
 
 
 def sampler_kind(sampler: Any) -> int:
     """The Sampler `kind` of the scene's sampler (a stratified one without jitter: 2)."""
     kind = SAMPLER_KINDS[sampler.type]
-    return 2 if kind == 1 and sampler.params.get("jitter") is False else kind
+    if sampler.params.get("jitter") is False:
+        return 2  # stratum centres (multijitter's too)
+    return kind
 
 
 def literal(value: Any, struct: str | None = None) -> str:

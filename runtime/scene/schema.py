@@ -231,6 +231,9 @@ _SPECS = [
     PluginSpec("sampler", "stratified", {"sample_count": P("integer", 4),
                                          "seed": P("integer", 0),
                                          "jitter": P("boolean", True)}),
+    PluginSpec("sampler", "multijitter", {"sample_count": P("integer", 4),
+                                          "seed": P("integer", 0),
+                                          "jitter": P("boolean", True)}),
 ]
 
 SCHEMA: dict[tuple[str, str], PluginSpec] = {(s.category, s.type): s for s in _SPECS}
