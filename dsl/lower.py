@@ -65,8 +65,28 @@ def lower_program(cp: CheckedProgram) -> ir.Module:
         mod.add(_FnLowerer(fn).run())
     for pl in cp.plugins:
         for fn in pl.fns.values():
-            mod.add(_FnLowerer(fn, pl).run())
+            lowered = mod.add(_FnLowerer(fn, pl).run())
+            if fn.name in pl.tables:
+                mod.add(_table_read(lowered, pl.tables[fn.name]))
     return mod
+
+
+TABLE_SLOT = "{}.table"  # the hidden plugin parameter holding a table's offset
+
+
+def _table_read(fn: Function, options: dict[str, Any]) -> Function:
+    """``NAME.read``, what calls to the table function ``NAME`` call: the same parameters
+    (and the hidden table offsets), its body the exact function until ``specialize``
+    replaces it by the lookup of the scene's table (see compiler/passes/specialize.py)."""
+    params = [Param(Value(p.value.type, p.value.name), p.uniform, p.default) for p in fn.params]
+    body = ir.Block()
+    b = Builder(body, fn.loc)
+    call = b.emit(Op.CALL, [p.value for p in params], list(fn.ret_types), {"callee": fn.name})
+    b.return_(*call.results)
+    method = fn.attrs["method"]
+    attrs = {**{k: v for k, v in fn.attrs.items() if k != "export"},
+             "table": {"fn": fn.name, "slot": TABLE_SLOT.format(method), **options}}
+    return Function(fn.name + ".read", params, list(fn.ret_types), body, fn.loc, attrs)
 
 
 # --------------------------------------------------------------------------------------
@@ -198,6 +218,10 @@ class _FnLowerer:
                 self.env[s] = v
                 self.plugin_values.append(v)
                 params.append(Param(v, uniform=True, default=d))
+            for name in self.plugin.tables:  # where the scene's tables are: see _table_read
+                v = Value(ir.I32, TABLE_SLOT.format(name))
+                self.plugin_values.append(v)
+                params.append(Param(v, uniform=True, default=-1))
             attrs = {"plugin": self.plugin.name, "kind": self.plugin.kind, "method": fn.name}
         else:
             attrs = {"source_name": fn.name}
@@ -492,10 +516,15 @@ class _FnLowerer:
         target = e.target
         if isinstance(target, FnInfo):
             args = [self.expr(a) for a in e.args]
+            callee = target.ir_name
             if target.plugin is not None:
                 args += self.plugin_values
+                # a table read, except in a table's own definition (tables are filled
+                # independently of each other)
+                if target.name in target.plugin.tables and self.fn.decl.table is None:
+                    callee += ".read"
             ins = self.b.emit(Op.CALL, args, [t] if t is not None else [],
-                              {"callee": target.ir_name}, loc=loc)
+                              {"callee": callee}, loc=loc)
             return ins.results[0] if ins.results else None
         kind, what = target
         if kind == "texture":

@@ -7,9 +7,15 @@ frontend turns early returns into flags).
 Guarantees: exported functions contain no ``call``; only exported functions remain (the
 library functions they used have been copied into them).  Recursion, direct or mutual, is a
 diagnostic at the call site that closes the cycle.
+
+``Inline(keep=evaluable)`` (the first of the pipeline's two) leaves the calls to the functions
+``keep(module)`` names, and those functions, for ``evaluate`` to fold; their own bodies are
+inlined all the same.
 """
 
 from __future__ import annotations
+
+from collections.abc import Callable
 
 from ..diagnostics import CompileError, Diagnostic
 from ..ir import Block, Function, Instr, Module, Op, Value, clone_block, replace_uses
@@ -20,13 +26,18 @@ from . import Pass, register
 class Inline(Pass):
     name = "inline"
 
+    def __init__(self, keep: Callable[[Module], set[str]] | None = None) -> None:
+        self.keep_fn = keep
+
     def run(self, module: Module) -> None:
         self.module = module
+        self.keep = self.keep_fn(module) if self.keep_fn is not None else set()
         self.done: set[str] = set()
         self.stack: list[tuple[str, Instr | None]] = []
         for fn in list(module.functions.values()):
             self._inline_function(fn, None)
-        for name in [n for n, f in module.functions.items() if not f.attrs.get("export")]:
+        for name in [n for n, f in module.functions.items()
+                     if not f.attrs.get("export") and n not in self.keep]:
             del module.functions[name]
 
     def _inline_function(self, fn: Function, site: Instr | None) -> None:
@@ -59,6 +70,9 @@ class Inline(Pass):
                 raise CompileError([Diagnostic(ins.loc,
                                                f"unknown function `{ins.attrs['callee']}`")])
             self._inline_function(callee, ins)
+            if callee.name in self.keep:
+                out.append(ins)
+                continue
             args = [mapping.get(v, v) for v in ins.operands]
             local = {p.value: a for p, a in zip(callee.params, args)}
             body = clone_block(callee.body, local)

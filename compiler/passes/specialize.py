@@ -168,15 +168,18 @@ class Specialize(Pass):
         self.scene = scene or SceneSpec()
         if not fold:  # the parameter buffer holds colours as `model` stores them
             self.scene, _ = parameter_slots(self.scene, model)
+        self._prm_len = _slots_end(self.scene)  # where the generic build's tables go in PRM
         self.report = report if report is not None else []
         self._prm: dict[str, Value] = {}  # placeholder -> its PRM argument, once it reads one
+        self._tables = _Tables()
 
     def run(self, module: Module) -> None:
         for name, (kind, method) in PLACEHOLDERS.items():
             placeholder = module.functions.get(name)
             if placeholder is None:
                 continue
-            self._dispatch(module, placeholder, getattr(self.scene, kind), method)
+            self._dispatch(module, placeholder, kind, method)
+        self._read_tables(module)
         for name, present in ((EMITTER_KIND_PLACEHOLDER, self.scene.emitter_kinds),
                               (SHAPE_KIND_PLACEHOLDER, self.scene.shape_kinds)):
             kinds = module.functions.get(name)
@@ -184,15 +187,17 @@ class Specialize(Pass):
                 kinds.body = _kind_test(kinds, present)
         if self._prm:
             for name, prm in self._prm.items():
-                module.functions[name].params.append(Param(prm, uniform=True))
+                if module.functions[name].params[-1].value is not prm:
+                    module.functions[name].params.append(Param(prm, uniform=True))
             _thread_buffer(module, PARAM_BUFFER)
         self.report.extend(describe(self.scene, [n for n in PLACEHOLDERS
                                                  if n in module.functions]))
 
-    def _dispatch(self, module: Module, placeholder: Function, instances: list[Instance],
-                  method: str) -> None:
-        """Dispatch over the plugin *types* of ``instances``; the parameters of one type's
-        instances are selected by id, so three diffuse materials cost one diffuse call."""
+    def _dispatch(self, module: Module, placeholder: Function, kind: str, method: str) -> None:
+        """Dispatch over the plugin *types* of the scene's ``kind`` instances; the parameters
+        of one type's instances are selected by id, so three diffuse materials cost one
+        diffuse call."""
+        instances: list[Instance] = getattr(self.scene, kind)
         if not instances:
             return  # the placeholder's own body stays
         ident, args = placeholder.params[0].value, [p.value for p in placeholder.params[1:]]
@@ -223,6 +228,8 @@ class Specialize(Pass):
                         if method in OPTIONAL else None)
                 params = [_constant(tb, p.value.type, False, placeholder.name)
                           if used is not None and p.value not in used else
+                          self._table_offset(tb, module, p, ident, kind, ids, own)
+                          if _is_table_slot(module, plugin, p) else
                           self._param_value(tb, p, ident, [instances[k] for k in ids], ids,
                                             defaults.get(p.value.name), module, placeholder,
                                             textures)
@@ -247,6 +254,65 @@ class Specialize(Pass):
         last = body.instrs.pop()
         body.instrs.append(Instr(Op.RETURN, last.operands, [], loc=last.loc))
         placeholder.body = body
+
+    def _table_offset(self, b: Builder, module: Module, p: Param, ident: Value, kind: str,
+                      ids: list[int], own: Function | None) -> Value:
+        """A table's hidden parameter: where the instance's samples are (selected by id)."""
+        assert own is not None
+        read = module.functions[f"{own.attrs['plugin']}.{p.value.name[:-len('.table')]}.read"]
+        instances = getattr(self.scene, kind)
+        out: Value | None = None
+        for k in reversed(ids):
+            at = b.const(self._table(module, read, kind, k, instances[k]), I32)
+            out = at if out is None else b.op(
+                Op.SELECT, I32, b.op(Op.EQ, BOOL, ident, b.const(k, I32)), at, out)
+        assert out is not None
+        return out
+
+    def _table(self, module: Module, read: Function, kind: str, k: int, inst: Instance) -> int:
+        """The offset of instance ``k``'s samples of the table ``read`` reads: computed now
+        (its parameters are constants) or laid out at the end of ``PRM`` for the runtime to
+        fill at load (the generic build: a parameter it takes is read from ``PRM``)."""
+        from ..precompute import table_size, tabulate
+
+        opts = read.attrs["table"]
+        key = (kind, k, opts["fn"])
+        if key not in self._tables.offsets:
+            size = table_size(opts)
+            names = {p.value.name for p in read.params}
+            if not any(isinstance(v, Slot) for n, v in inst.params.items() if n in names):
+                values = tabulate(module, opts, _table_params(read, inst))
+                self._tables.offsets[key] = len(self._tables.values)
+                self._tables.values.extend(float(v) for v in values)
+            else:
+                self._tables.offsets[key] = self._prm_len + self._tables.prm
+                module.attrs.setdefault("tables", []).append(
+                    {**opts, "kind": kind, "index": k, "offset": self._tables.offsets[key]})
+                self._tables.prm += size
+        return self._tables.offsets[key]
+
+    def _read_tables(self, module: Module) -> None:
+        """The read functions of the tables laid out become lookups (see precompute)."""
+        from ..precompute import build_read
+
+        if not self._tables.offsets:
+            return
+        self.report.append(f"tables: {len(self._tables.offsets)} ({len(self._tables.values)} "
+                           f"values computed now, {self._tables.prm} filled at load in "
+                           f"{PARAM_BUFFER})")
+        for fn in list(module.functions.values()):
+            if "table" not in fn.attrs:
+                continue
+            if not self._tables.prm:
+                build_read(fn, None, self._tables.values)
+                continue
+            if self._tables.values:
+                raise CompileError(f"{fn.name}: a build cannot both fold tables and read "
+                                   f"them from {PARAM_BUFFER}")
+            prm = Value(BufferType(F32), PARAM_BUFFER)
+            fn.params.append(Param(prm, uniform=True))
+            build_read(fn, prm, None)
+            self._prm[fn.name] = prm
 
     def _param_value(self, b: Builder, p: Param, ident: Value, group: list[Instance],
                      ids: list[int], default: Any, module: Module, placeholder: Function,
@@ -314,6 +380,40 @@ class Specialize(Pass):
                                    f"{p.value.type}`, which `{placeholder.name}` does not have")
             operands.append(v)
         return b.emit(Op.CALL, operands, list(tex.ret_types), {"callee": tex.name}).result
+
+
+class _Tables:
+    """The tables laid out so far: (kind, instance, table function) -> offset; the folded
+    values, or the size claimed at the end of ``PRM``."""
+
+    def __init__(self) -> None:
+        self.offsets: dict[tuple[str, int, str], int] = {}
+        self.values: list[float] = []  # folded
+        self.prm = 0  # size laid out at the end of PRM
+
+
+def _slots_end(scene: SceneSpec) -> int:
+    """The size of the generic build's ``PRM`` without tables: the end of its last slot."""
+    ends = [v.offset + v.size for kind in ("bsdfs", "emitters", "textures", "bsdf_leaves")
+            for inst in getattr(scene, kind) for v in inst.params.values()
+            if isinstance(v, Slot)]
+    return max(ends, default=0)
+
+
+def _is_table_slot(module: Module, plugin: str, p: Param) -> bool:
+    name = p.value.name or ""
+    return name.endswith(".table") and f"{plugin}.{name[:-len('.table')]}.read" in module.functions
+
+
+def _table_params(read: Function, inst: Instance) -> dict[str, Any]:
+    """An instance's values of the scalar parameters a table function takes (textures and
+    colours left out: a table cannot depend on them)."""
+    out = {}
+    for p in read.params:
+        value = inst.params.get(p.value.name or "", p.default)
+        if isinstance(p.value.type, ScalarType) and not isinstance(value, (TextureRef, Slot)):
+            out[p.value.name or ""] = value
+    return out
 
 
 def _constant(b: Builder, t: Type, value: Any, what: str) -> Value:
