@@ -99,7 +99,7 @@ class _Kernel:
                 if v is None or isinstance(v, (tuple, list)):
                     raise CompileError(f"table parameter `{a.name}`: expected one number, "
                                        f"got {v!r}")
-                call.append(_CTYPES[a.dtype](_NP[a.dtype](v)))
+                call.append(_CTYPES[a.dtype](_NP[a.dtype](v).item()))
         call += [None, 0]
         self.fn(*call)
         return out
