@@ -29,6 +29,7 @@ from typing import Any
 
 import numpy as np
 
+from ..core.scene_spec import Instance, Slot, TextureRef
 from .diagnostics import CompileError
 from .ir import (
     F32,
@@ -59,6 +60,17 @@ def sample_points(options: dict[str, Any]) -> np.ndarray:
 
 def table_size(options: dict[str, Any]) -> int:
     return int(options.get("n", 1))
+
+
+def table_params(read: Function, inst: Instance) -> dict[str, Any]:
+    """An instance's values of the scalar parameters a table's read function takes (colours
+    and textures left out: a table cannot depend on them, see :func:`tabulate`)."""
+    out = {}
+    for p in read.params:
+        value = inst.params.get(p.value.name or "", p.default)
+        if isinstance(p.value.type, ScalarType) and not isinstance(value, (TextureRef, Slot)):
+            out[p.value.name or ""] = value
+    return out
 
 
 def tabulate(module: Module, options: dict[str, Any], params: dict[str, Any]) -> np.ndarray:

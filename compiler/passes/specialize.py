@@ -273,7 +273,7 @@ class Specialize(Pass):
         """The offset of instance ``k``'s samples of the table ``read`` reads: computed now
         (its parameters are constants) or laid out at the end of ``PRM`` for the runtime to
         fill at load (the generic build: a parameter it takes is read from ``PRM``)."""
-        from ..precompute import table_size, tabulate
+        from ..precompute import table_params, table_size, tabulate
 
         opts = read.attrs["table"]
         key = (kind, k, opts["fn"])
@@ -281,7 +281,7 @@ class Specialize(Pass):
             size = table_size(opts)
             names = {p.value.name for p in read.params}
             if not any(isinstance(v, Slot) for n, v in inst.params.items() if n in names):
-                values = tabulate(module, opts, _table_params(read, inst))
+                values = tabulate(module, opts, table_params(read, inst))
                 self._tables.offsets[key] = len(self._tables.values)
                 self._tables.values.extend(float(v) for v in values)
             else:
@@ -403,17 +403,6 @@ def _slots_end(scene: SceneSpec) -> int:
 def _is_table_slot(module: Module, plugin: str, p: Param) -> bool:
     name = p.value.name or ""
     return name.endswith(".table") and f"{plugin}.{name[:-len('.table')]}.read" in module.functions
-
-
-def _table_params(read: Function, inst: Instance) -> dict[str, Any]:
-    """An instance's values of the scalar parameters a table function takes (textures and
-    colours left out: a table cannot depend on them)."""
-    out = {}
-    for p in read.params:
-        value = inst.params.get(p.value.name or "", p.default)
-        if isinstance(p.value.type, ScalarType) and not isinstance(value, (TextureRef, Slot)):
-            out[p.value.name or ""] = value
-    return out
 
 
 def _constant(b: Builder, t: Type, value: Any, what: str) -> Value:

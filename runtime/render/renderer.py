@@ -23,6 +23,7 @@ import numpy as np
 from ...compiler.build import Build
 from ...compiler.diagnostics import CompileError
 from ...compiler.passes.specialize import PARAM_BUFFER, describe, parameter_slots
+from ..tables import fill_tables
 from ...compiler.targets import Target
 from ...core.color import RGB, ColorModel
 from ...core.scene_spec import Instance, SceneSpec
@@ -286,8 +287,12 @@ class Scene:
                                              self.buffers.textures)
         if not self.specialize:  # generic: parameter values come from PRM at run time
             scene, self.params = parameter_slots(scene, self.build.model)
+        filename = str(self.path.with_suffix(".rdsl"))
         mod = jit(src, build=self.build, scene=scene, search_paths=self.search_paths,
-                  filename=str(self.path.with_suffix(".rdsl")))
+                  filename=filename)
+        if not self.specialize:  # and so do the tables the plugins compute per scene
+            self.params = fill_tables(mod, self.scene_spec, self.params, src, filename,
+                                      self.search_paths)
         self._module = mod
         self.compile_seconds = mod.compile_seconds
         self.from_cache = mod.from_cache
