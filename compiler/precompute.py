@@ -9,8 +9,8 @@ lays them out at the end of ``PRM`` and the runtime fills them at scene load, bo
 :func:`tabulate`.
 
 The samples are computed natively: the table function becomes a kernel (the pipeline and
-the LLVM backend, JIT-compiled in-process and kept per function), mapped over the sample
-points with the instance's parameters as uniform arguments.  Its code depends on the plugin,
+the LLVM backend for the scalar target at O1, JIT-compiled in-process and kept per
+function: about a second), mapped over the sample points with the instance's parameters as uniform arguments.  Its code depends on the plugin,
 never on the values, so every instance and scene reuses it.  Tables are the place for the
 expensive integrals (Mitsuba's are 64 x 32 x 32 and 64 x 128 x 128 evaluations of a
 microfacet integrand), far beyond what the reference interpreter runs in a second; small
@@ -118,19 +118,24 @@ class _Kernel:
 
 
 def _kernel(module: Module, fn: Function, has_x: bool) -> _Kernel:
-    from .printer import print_module
+    from .printer import print_function
 
-    sub = _submodule(module, fn)
-    key = print_module(sub)
+    names = _reachable(module, fn)
+    key = repr(has_x) + "".join(print_function(module.functions[n]) for n in names)
     with _lock:
         k = _kernels.get(key)
         if k is None:
+            sub = Module(structs=dict(module.structs))
+            for name in names:  # a copy: the passes below rewrite what they compile
+                f = copy.deepcopy(module.functions[name])
+                f.attrs.pop("export", None)
+                sub.add(f)
             k = _kernels[key] = _compile(sub, fn, has_x)
         return k
 
 
-def _submodule(module: Module, fn: Function) -> Module:
-    """A copy of ``fn`` and every function it calls (nothing exported)."""
+def _reachable(module: Module, fn: Function) -> list[str]:
+    """``fn`` and every function it calls, sorted by name."""
     names, todo = set(), [fn.name]
     while todo:
         name = todo.pop()
@@ -138,12 +143,7 @@ def _submodule(module: Module, fn: Function) -> Module:
             continue
         names.add(name)
         todo += [i.attrs["callee"] for i in module.functions[name].walk() if i.op is Op.CALL]
-    sub = Module(structs=dict(module.structs))
-    for name in sorted(names):
-        f = copy.deepcopy(module.functions[name])
-        f.attrs.pop("export", None)
-        sub.add(f)
-    return sub
+    return sorted(names)
 
 
 def _compile(sub: Module, fn: Function, has_x: bool) -> _Kernel:
@@ -156,7 +156,7 @@ def _compile(sub: Module, fn: Function, has_x: bool) -> _Kernel:
     from .passes.optimize import Optimize
 
     wrapper = _wrapper(sub, sub.functions[fn.name], has_x)
-    run_passes(sub, [Inline(), Optimize()])
+    run_passes(sub, [Inline(), Optimize()], verify=False)
     used = {v for i in wrapper.walk() for v in i.operands}
     for p in wrapper.params:
         if not isinstance(p.value.type, ScalarType) and p.value in used:
@@ -164,9 +164,10 @@ def _compile(sub: Module, fn: Function, has_x: bool) -> _Kernel:
                                f"of type {p.value.type}; a table may depend only on `Float`, "
                                "`Int` and `Bool` parameters", fn.loc)
     wrapper.params = [p for p in wrapper.params if isinstance(p.value.type, ScalarType)]
-    build = Build.of("host", "rgb")
-    run_passes(sub, pipeline(build))
-    mod, tm = optimized_module(sub, build.target)
+    # run once per scene: the scalar target and LLVM's O1 compile fastest
+    build = Build.of("scalar", "rgb")
+    run_passes(sub, pipeline(build), verify=False)
+    mod, tm = optimized_module(sub, build.target, speed=1)
     import llvmlite.binding as llvm
 
     engine = llvm.create_mcjit_compiler(mod, tm)

@@ -9,8 +9,8 @@ library functions they used have been copied into them).  Recursion, direct or m
 diagnostic at the call site that closes the cycle.
 
 ``Inline(keep=evaluable)`` (the first of the pipeline's two) leaves the calls to the functions
-``keep(module)`` names, and those functions, for ``evaluate`` to fold; their own bodies are
-inlined all the same.
+``keep(module)`` names, and those of them still called, for ``evaluate`` to fold; their own
+bodies are inlined all the same.
 """
 
 from __future__ import annotations
@@ -36,8 +36,9 @@ class Inline(Pass):
         self.stack: list[tuple[str, Instr | None]] = []
         for fn in list(module.functions.values()):
             self._inline_function(fn, None)
+        called = _still_called(module)
         for name in [n for n, f in module.functions.items()
-                     if not f.attrs.get("export") and n not in self.keep]:
+                     if not f.attrs.get("export") and n not in called]:
             del module.functions[name]
 
     def _inline_function(self, fn: Function, site: Instr | None) -> None:
@@ -82,3 +83,16 @@ class Inline(Pass):
             for res, val in zip(ins.results, ret.operands):
                 mapping[res] = val
         block.instrs = out
+
+
+def _still_called(module: Module) -> set[str]:
+    """The functions the calls left (to kept functions) reach, from the exported ones."""
+    out: set[str] = set()
+    todo = [f for f in module.functions.values() if f.attrs.get("export")]
+    while todo:
+        for ins in todo.pop().walk():
+            name = ins.attrs["callee"] if ins.op is Op.CALL else None
+            if name is not None and name not in out and name in module.functions:
+                out.add(name)
+                todo.append(module.functions[name])
+    return out

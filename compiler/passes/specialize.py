@@ -26,6 +26,16 @@ texture at the same ``si`` first is the same thing.  A ``Float`` parameter set b
 lookup (its plugins' ``eval_1``, Mitsuba's).  A method in ``OPTIONAL`` (``disperses``) may
 be missing from a plugin: its instances then give the constant listed there.
 
+A plugin's ``table`` functions (docs/language.md, "Tables") are computed parameters: each
+method gets, per table, a hidden ``NAME.table`` parameter, which the dispatch sets to where
+the instance's samples are, and the table's read function ``PLUGIN.NAME.read`` becomes the
+interpolation (:func:`rdsl.compiler.precompute.build_read`).  Where the instance's
+parameters are constants the samples are computed now (:func:`~rdsl.compiler.precompute.
+tabulate`) and folded, all the scene's tables in one ``table`` constant; where a parameter
+the table takes is read from ``PRM`` they are laid out after the parameters in ``PRM`` and
+listed in ``module.attrs["tables"]`` (the manifest's ``tables``) for the runtime to fill at
+scene load (runtime/tables.py).
+
 The generic build (``Specialize(scene, fold=False, model=...)``, ``rdsl render
 --no-specialize``) keeps the same dispatch over plugin types but reads every parameter the
 scene sets from a float buffer ``PRM`` at run time (a :class:`Slot` per value, laid out by
