@@ -68,8 +68,8 @@ def table_params(read: Function, inst: Instance) -> dict[str, Any]:
     out = {}
     for p in read.params:
         value = inst.params.get(p.value.name or "", p.default)
-        if isinstance(p.value.type, ScalarType) and not isinstance(value, (TextureRef, Slot)):
-            out[p.value.name or ""] = value
+        if isinstance(p.value.type, ScalarType) and not isinstance(value, Slot):
+            out[p.value.name or ""] = value  # a texture here: an error if the table uses it
     return out
 
 
@@ -85,7 +85,9 @@ def tabulate(module: Module, options: dict[str, Any], params: dict[str, Any]) ->
 class _Kernel:
     """A JIT-compiled table function: ``(xs, params) -> values``."""
 
-    def __init__(self, engine: Any, address: int, args: list[Any], params: list[Param]) -> None:
+    def __init__(self, name: str, engine: Any, address: int, args: list[Any],
+                 params: list[Param], used: set[str]) -> None:
+        self.name, self.used = name, used
         self.engine = engine  # keeps the code alive
         self.args = args  # the CArgs after n
         self.params = params  # the uniform parameters, with their defaults
@@ -108,6 +110,12 @@ class _Kernel:
                 call += [out.ctypes.data, 4]
             else:
                 v = values.get(a.name, defaults.get(a.name))
+                if isinstance(v, TextureRef):
+                    if a.name in self.used:
+                        raise CompileError(f"table `{self.name}` depends on `{a.name}`, which "
+                                           "the scene sets by a texture; a table's parameters "
+                                           "must be numbers")
+                    v = defaults.get(a.name, 0)
                 if v is None or isinstance(v, (tuple, list)):
                     raise CompileError(f"table parameter `{a.name}`: expected one number, "
                                        f"got {v!r}")
@@ -158,6 +166,7 @@ def _compile(sub: Module, fn: Function, has_x: bool) -> _Kernel:
     wrapper = _wrapper(sub, sub.functions[fn.name], has_x)
     run_passes(sub, [Inline(), Optimize()], verify=False)
     used = {v for i in wrapper.walk() for v in i.operands}
+    used_names = {p.value.name or "" for p in wrapper.params if p.value in used}
     for p in wrapper.params:
         if not isinstance(p.value.type, ScalarType) and p.value in used:
             raise CompileError(f"table `{fn.name}` depends on the parameter `{p.value.name}` "
@@ -177,7 +186,7 @@ def _compile(sub: Module, fn: Function, has_x: bool) -> _Kernel:
         raise CompileError(f"table `{fn.name}`: the JIT did not produce its kernel", fn.loc)
     compiled = sub.functions[wrapper.name]
     uniforms = [p for p in wrapper.params if p.uniform]
-    return _Kernel(engine, address, c_args(compiled), uniforms)
+    return _Kernel(fn.name, engine, address, c_args(compiled), uniforms, used_names)
 
 
 def _wrapper(sub: Module, fn: Function, has_x: bool) -> Function:

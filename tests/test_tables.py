@@ -217,3 +217,17 @@ def test_generic_build_renders_the_specialized_image(tmp_path):
     path = tmp_path / "rp.xml"
     path.write_text(scene_xml(body, OBLIQUE, res=24))
     print(same_image(path, spp=4))
+
+
+def test_a_table_cannot_depend_on_a_texture():
+    from rdsl.core.scene_spec import TextureRef
+
+    module = frontend(STDLIB / "bsdf" / "roughplastic.rdsl")
+    read = module.functions["roughplastic.external_transmittance.read"]
+    params = table_params(read, Instance("roughplastic", {"alpha": TextureRef(0)}))
+    with pytest.raises(CompileError, match="depends on `alpha`, which the scene sets by a "
+                                           "texture"):
+        tabulate(module, read.attrs["table"], params)
+    # a texture on a parameter the table does not use is fine
+    params = table_params(read, Instance("roughplastic", {"diffuse_reflectance": TextureRef(0)}))
+    assert tabulate(module, read.attrs["table"], params).shape == (64,)
