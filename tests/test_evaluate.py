@@ -14,7 +14,7 @@ from rdsl.compiler.ir import Op
 from rdsl.core.scene_spec import Instance, SceneSpec
 
 # `series(x, n)`: the partial sum of exp(x) = sum x^k / k!, a loop the optimizer cannot fold
-SRC = """
+SERIES = """
 fn series(x: Float, n: Int) -> Float {
     var term = 1.0;
     var acc = 1.0;
@@ -24,6 +24,8 @@ fn series(x: Float, n: Int) -> Float {
     }
     return acc;
 }
+"""
+SRC = SERIES + """
 fn folded(y: Float) -> Float {
     return y * series(0.5, 12);
 }
@@ -61,17 +63,7 @@ def test_evaluated_kernels_compute_the_same_values():
     np.testing.assert_allclose(mod.folded(y), y * math.exp(0.5), rtol=1e-6, atol=1e-7)
 
 
-PLUGIN_SRC = """
-import render.scene;
-fn series(x: Float, n: Int) -> Float {
-    var term = 1.0;
-    var acc = 1.0;
-    for k in 1..n {
-        term = term * x / Float(k);
-        acc += term;
-    }
-    return acc;
-}
+PLUGIN_SRC = "import render.scene;\n" + SERIES + """
 bsdf glow {
     param strength: Float = 1.0;
     fn eval(si: Surface, wo: Vec3) -> Spectrum { return Spectrum(series(strength, 16) * wo.z); }
