@@ -19,6 +19,14 @@ def __getattr__(name: str):
         from .runtime.render import renderer
 
         return getattr(renderer, name)
+    if name == "Build":  # a target, a colour model and a differentiation mode
+        from .compiler.build import Build
+
+        return Build
+    if name == "optim":
+        from .runtime import optim
+
+        return optim
     if name == "register_plugin":
         from .runtime import plugins
 

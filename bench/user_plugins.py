@@ -3,6 +3,8 @@
 * the stdlib `diffuse`;
 * `mydiffuse`, a copy of stdlib/bsdf/diffuse.rdsl under another name, found next to the scene
   (issue 15: it must cost the same, within noise);
+* `mypath`, a copy of the stdlib `path` integrator (stdlib/integrator/path.rdsl) under
+  another name: a user integrator must cost what the stdlib one does;
 * the example Oren–Nayar BSDF (examples/plugins/orennayar.rdsl, sigma 20 degrees), a user
   plugin with some trigonometry, against stdlib BSDFs of similar or greater complexity
   (`plastic`, `roughconductor`): it must render within 10% of them.
@@ -34,6 +36,7 @@ ORENNAYAR = ROOT / "examples" / "plugins" / "orennayar.rdsl"
 CASES = {
     "diffuse (stdlib)": ("diffuse", "reflectance", ""),
     "mydiffuse (user copy)": ("mydiffuse", "reflectance", ""),
+    "diffuse, mypath (user integrator)": ("diffuse", "reflectance", ""),
     "orennayar (user)": ("orennayar", "reflectance", '<float name="sigma" value="20"/>'),
     "plastic (stdlib)": ("plastic", "diffuse_reflectance", ""),
     "roughconductor (stdlib)": ("roughconductor", "specular_reflectance",
@@ -48,11 +51,16 @@ def write_scenes(folder: Path) -> dict[str, Path]:
         re.sub(r"\bbsdf\s+diffuse\b", "bsdf mydiffuse",
                (STDLIB / "bsdf" / "diffuse.rdsl").read_text()))
     (folder / "orennayar.rdsl").write_text(ORENNAYAR.read_text())
+    (folder / "mypath.rdsl").write_text(
+        re.sub(r"\bintegrator\s+path\b", "integrator mypath",
+               (STDLIB / "integrator" / "path.rdsl").read_text()))
     out = {}
     for k, (name, (plugin, param, extra)) in enumerate(CASES.items()):
         text = re.sub(r'<bsdf type="diffuse" id="(\w+)">\s*<rgb name="reflectance"',
                       lambda m, p=plugin, q=param, e=extra:
                       f'<bsdf type="{p}" id="{m.group(1)}">{e}<rgb name="{q}"', src)
+        if "mypath" in name:
+            text = text.replace('<integrator type="path">', '<integrator type="mypath">')
         path = folder / f"case{k}.xml"
         path.write_text(text)
         out[name] = path
@@ -84,10 +92,10 @@ def main() -> None:
     base = statistics.median(times["diffuse (stdlib)"])
     print(f"Cornell box {args.res}x{args.res}, {args.spp} spp, {args.threads} threads, "
           f"median of {args.repeat} alternating runs")
-    print(f"{'BSDF of the three colours':28s} {'seconds':>8s} {'vs diffuse':>10s}")
+    print(f"{'case (BSDF of the colours, integrator)':36s} {'seconds':>8s} {'vs diffuse':>10s}")
     for name, ts in times.items():
         m = statistics.median(ts)
-        print(f"{name:28s} {m:8.3f} {m / base:10.3f}")
+        print(f"{name:36s} {m:8.3f} {m / base:10.3f}")
 
 
 if __name__ == "__main__":

@@ -14,18 +14,26 @@ from .diagnostics import CompileError
 from .targets import Target, get_target
 
 
+AD_MODES = (None, "forward")
+
+
 @dataclass(frozen=True)
 class Build:
     """A code-generation target and the colour model its kernels compute in."""
 
     target: Target
     model: ColorModel
+    # automatic differentiation: None, or "forward" (compiler/passes/ad_forward.py)
+    ad: str | None = None
 
     @classmethod
-    def of(cls, target: str | Target = "host", variant: str | ColorModel = "rgb") -> Build:
+    def of(cls, target: str | Target = "host", variant: str | ColorModel = "rgb",
+           ad: str | None = None) -> Build:
         """The build for a target name (``host`` resolves to this machine's widest) and a
         variant name; a name that is neither raises a diagnostic listing the valid ones."""
-        return cls(get_target(target), color_model(variant))
+        if ad not in AD_MODES:
+            raise CompileError(f"unknown differentiation mode `{ad}` (valid: forward)")
+        return cls(get_target(target), color_model(variant), ad)
 
     @property
     def width(self) -> int:

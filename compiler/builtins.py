@@ -145,6 +145,9 @@ def _table(*entries: Builtin) -> dict[str, Builtin]:
 BUILTINS: dict[str, Builtin] = _table(
     # math: one op each, elementwise on vectors and spectra
     Builtin("sqrt", Sig.FLOAT_MAP, Op.SQRT),
+    # automatic differentiation (compiler/passes/ad_forward.py)
+    Builtin("derivative", Sig.FLOAT_MAP, Op.DERIV),
+    Builtin("detach", Sig.FLOAT_MAP, Op.DETACH),
     Builtin("floor", Sig.FLOAT_MAP, Op.FLOOR),
     Builtin("ceil", Sig.FLOAT_MAP, Op.CEIL),
     Builtin("abs", Sig.NUMBER_MAP, Op.ABS),

@@ -18,6 +18,8 @@ from .diagnostics import CompileError
 Command = Callable[[argparse.Namespace], int]
 
 _VARIANTS_HELP = ", ".join(VARIANTS) + " (default: rgb)"
+_AD_HELP = ("differentiate: 'forward' gives each kernel with Float arguments a tangent "
+            "argument per argument and a tangent result per Float result (docs/ad.md)")
 
 
 def add_commands(sub: argparse._SubParsersAction) -> dict[str, Command]:
@@ -33,6 +35,7 @@ def add_commands(sub: argparse._SubParsersAction) -> dict[str, Command]:
                    help="print after every run of PASS ('lower' for the frontend's IR, "
                         "'all' for every pass); default: the final IR")
     i.add_argument("--no-locs", action="store_true", help="omit source locations")
+    i.add_argument("--ad", choices=["forward"], default=None, help=_AD_HELP)
 
     k = sub.add_parser("compile", help="compile to a shared library, C header and manifest")
     k.add_argument("file")
@@ -44,6 +47,7 @@ def add_commands(sub: argparse._SubParsersAction) -> dict[str, Command]:
                         "(default: the source's name in the current folder)")
     k.add_argument("--emit", choices=["lib", "llvm", "asm", "obj"], default="lib",
                    help="what to produce; llvm/asm go to stdout unless -o is given")
+    k.add_argument("--ad", choices=["forward"], default=None, help=_AD_HELP)
     return {"check": _check, "ir": _ir, "compile": _compile}
 
 
@@ -68,7 +72,7 @@ def _ir(args: argparse.Namespace) -> int:
     from .passes import pass_names
     from .printer import print_module
 
-    build = Build.of(args.target, args.variant)
+    build = Build.of(args.target, args.variant, args.ad)
     names = pass_names() + ["lower", "all"]
     if args.print_after is not None and args.print_after not in names:
         raise CompileError(f"unknown pass `{args.print_after}` (expected one of: "
@@ -105,7 +109,7 @@ def _compile(args: argparse.Namespace) -> int:
     from .build import Build
     from .driver import compile_kernels
 
-    build = Build.of(args.target, args.variant)
+    build = Build.of(args.target, args.variant, args.ad)
     tgt = build.target
     src = _require_file(args.file).resolve()
     module, _ = compile_kernels(src, build)

@@ -17,6 +17,7 @@ from .build import Build
 from .diagnostics import CompileError
 from .ir import Module
 from .passes import Pass
+from .passes.ad_forward import AdForward
 from .passes.evaluate import Evaluate, evaluable
 from .passes.inline import Inline
 from .passes.lift import Lift
@@ -36,15 +37,17 @@ def pipeline(build: Build, scene: SceneSpec | None = None,
     """The passes from lowered IR to vectorized scalar IR for ``build``, in order."""
     return [
         *([Specialize(scene, report)] if scene is not None else []),  # the scene's instances
-        Inline(keep=evaluable),  # calls become bodies, but pure calls running loops
+        Inline(build.ad is not None, keep=evaluable),  # calls become bodies, but pure calls
+        # running loops
         Optimize(),  # fold and prune early: what the scene fixes becomes constants
         Evaluate(report=report),  # pure calls with constant arguments: run once, now
-        Inline(),  # the calls left become bodies; recursion is a diagnostic
+        Inline(build.ad is not None),  # the calls left become bodies; recursion is a diagnostic
         Optimize(),  # fold the evaluated constants through
         Lift(build.model),  # Spectrum becomes mono/rgb; `if const` traits become constants
         Optimize(),  # fold the trait branches away
         Scalarize(),  # aggregates become scalars; kernel ABI recorded
         Optimize(),  # forward extracts, CSE the leaves
+        AdForward(build.ad),  # tangents (forward mode), or derivative() = 0 without AD
         Vectorize(build.width),  # SPMD over lanes with masks
         Optimize(),  # CSE broadcasts and masks
     ]

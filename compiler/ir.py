@@ -324,6 +324,10 @@ class Op(enum.Enum):
     SCATTER = "scatter"  # scatter %buf, %index, %value, %mask   (after vectorize)
     # calls (removed by inline)
     CALL = "call"  # attrs: callee
+    # automatic differentiation (removed by ad_forward)
+    DERIV = "ad.derivative"  # %x -> the derivative of x along the build's tangent (0 without)
+    DETACH = "ad.detach"  # %x -> x, whose derivative is 0
+    AD_RULE = "ad.rule"  # %x1..%xn, %y, %p1..%pn -> y = f(x..), partials p_k = df/dx_k
     # vector
     ANY = "any"  # varying bool -> uniform bool
     LANE = "lane"  # the lane index within the vector (varying i32)

@@ -27,7 +27,7 @@ from .printer import Namer, type_str, types_str
 
 _BINARY = {Op.ADD, Op.SUB, Op.MUL, Op.DIV, Op.REM, Op.AND, Op.OR, Op.XOR, Op.SHL, Op.SHR,
            Op.MIN, Op.MAX}
-_UNARY = {Op.NEG, Op.NOT, Op.SQRT, Op.FLOOR, Op.CEIL, Op.ABS}
+_UNARY = {Op.NEG, Op.NOT, Op.SQRT, Op.FLOOR, Op.CEIL, Op.ABS, Op.DERIV, Op.DETACH}
 
 
 def _tl(ts: list[Type]) -> str:

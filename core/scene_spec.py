@@ -72,3 +72,5 @@ class SceneSpec:
     emitter_kinds: tuple[int, ...] | None = None
     # the kinds of shape (geometry.rdsl: 0 mesh, 1 sphere, 2 disk); None: any kind may occur
     shape_kinds: tuple[int, ...] | None = None
+    # the scene's integrators (one per plugin type: a wrapper such as `aov`, its nested one)
+    integrators: list[Instance] = field(default_factory=list)

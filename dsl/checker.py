@@ -40,6 +40,7 @@ from . import ast as A
 from .builtins import BUILTIN_FNS, check_binary, check_builtin, check_unary
 from .declarations import Declarations
 from .imports import STDLIB, load_program
+from .interfaces import PLUGIN_INTERFACES, check_integrator
 from .parser import parse
 from .tables import table_options as _table_options
 from .program import CheckedProgram, FnInfo, ModuleInfo, PluginInfo, Symbol
@@ -73,16 +74,6 @@ __all__ = [
 # `wavelengths`: a spectral build whose kernel sets its wavelengths (compiler/passes/lift/driver.py)
 TRAITS = ("mono", "rgb", "spectral", "polarized", "wavelengths")
 
-PLUGIN_INTERFACES: dict[str, list[tuple[str, list[tuple[str, str]], str]]] = {
-    "bsdf": [("eval", [("si", "Surface"), ("wo", "Vec3")], "Spectrum"),
-             ("pdf", [("si", "Surface"), ("wo", "Vec3")], "Float"),
-             ("sample", [("si", "Surface"), ("u1", "Float"), ("u2", "Vec2")], "BsdfSample")],
-    # area lights are sampled by the integrator over the scene's triangles, so only the
-    # emitted radiance is required of an emitter
-    "emitter": [("eval", [("si", "Surface")], "Spectrum")],
-    "texture": [("eval", [("si", "Surface")], "Spectrum")],
-    "integrator": [("li", [("ray", "Ray"), ("seed", "UInt")], "Spectrum")],
-}
 
 
 def check_program(source: str, filename: str, search_paths: list[Path] | None = None,
@@ -123,6 +114,7 @@ class _Checker(Declarations):
         self.plugins: list[PluginInfo] = []
         self.calls: dict[FnInfo, list[tuple[FnInfo, Loc]]] = {}
         self.ctx: _FnCtx | None = None
+        self.plugin_names: dict[str, PluginInfo] = {}
 
     # ---------------------------------------------------------------- top level
     def run(self) -> CheckedProgram:
@@ -136,6 +128,7 @@ class _Checker(Declarations):
                               f"{seen_plugins[pd.name].loc})", pd.loc)
                 seen_plugins[pd.name] = pd
                 self.plugins.append(self._declare_plugin(pd, mod))
+                self.plugin_names[pd.name] = self.plugins[-1]
         for fn in self.functions:
             self._check_fn(fn, None)
         for pl in self.plugins:
@@ -184,6 +177,8 @@ class _Checker(Declarations):
             if fn.param_types != want or fn.ret != self._iface_type(ret):
                 raise err(f"`{pd.name}.{mname}` has the wrong signature: expected `{sig}`, "
                           f"found `{fn.signature()}`", fn.decl.loc)
+        if pd.kind == "integrator":
+            check_integrator(pl, self.structs)
         return pl
 
     def _iface_type(self, name: str) -> Type | None:
@@ -403,7 +398,9 @@ class _Checker(Declarations):
                 except KeyError:
                     raise err(f"struct `{t.name}` has no field `{e.name}`",
                               e.name_loc or e.loc) from None
-                return t.fields[e.index][1]
+                ft = t.fields[e.index][1]
+                self._check_private(t, e, ft)
+                return ft
             raise err(f"{quoted(t)} has no field `{e.name}`", e.name_loc or e.loc)
         if isinstance(e, A.TupleField):
             t = self._expr(e.obj, scope)
@@ -428,6 +425,17 @@ class _Checker(Declarations):
         if isinstance(e, A.Convert):
             return e.to
         raise err("unsupported expression", e.loc)  # pragma: no cover
+
+    def _check_private(self, t: StructType, e: A.Field, ft: Type) -> None:
+        """A struct's buffer fields are private to the module that declares the struct:
+        elsewhere the struct is a handle used through its functions (``Scene``)."""
+        decl = self.struct_decls.get(t.name)
+        assert self.ctx is not None
+        if isinstance(ft, BufferType) and decl is not None and \
+                decl[1] is not self.ctx.fn.module:
+            raise err(f"field `{e.name}` of `{t.name}` is a buffer, private to "
+                      f"{decl[1].key} where `{t.name}` is declared; use the functions that "
+                      f"take a `{t.name}` instead", e.name_loc or e.loc)
 
     def _struct_lit(self, e: A.StructLit, scope: _Scope) -> Type:
         st = self.structs.get(e.name)
@@ -465,6 +473,10 @@ class _Checker(Declarations):
                 raise err(f"`{name}` is not a function (it has type {quoted(sym.type)})",
                           e.func.loc)
         elif isinstance(e.func, A.Field):
+            obj = e.func.obj
+            if isinstance(obj, A.Name) and scope.lookup(obj.id) is None and \
+                    obj.id in self.plugin_names:
+                return self._plugin_call(e, self.plugin_names[obj.id], scope)
             name = e.func.name
             args = [e.func.obj] + e.args
         else:
@@ -491,6 +503,19 @@ class _Checker(Declarations):
                       e.func.loc)
         raise err(f"unknown function `{name}`", e.func.loc if isinstance(e.func, A.Name)
                   else e.func.name_loc or e.loc)
+
+    def _plugin_call(self, e: A.Call, plugin: PluginInfo, scope: _Scope) -> Type | None:
+        """``plugin.fn(args)``: a plugin's function called by name.  Outside the plugin, its
+        ``param``s are those of the scene's instance of it (``specialize``) or its
+        defaults."""
+        assert isinstance(e.func, A.Field)
+        fn = plugin.fns.get(e.func.name)
+        if fn is None:
+            have = ", ".join(f"`{f}`" for f in plugin.fns)
+            raise err(f"{plugin.kind} `{plugin.name}` has no function `{e.func.name}` "
+                      f"(it has {have})", e.func.name_loc or e.loc)
+        types = [self._expr(a, scope) for a in e.args]
+        return self._user_call(e, f"{plugin.name}.{fn.name}", [fn], e.args, types)
 
     def _texture_call(self, e: A.Call, sym: Symbol, scope: _Scope) -> Type:
         surf = self.structs.get("Surface")

@@ -13,6 +13,11 @@ from . import ast as A
 from .program import FnInfo, ModuleInfo, PluginInfo, Symbol
 from .types import BUILTIN_TYPES, TEXTURE, err, mangle, quoted
 
+# stdlib types a plugin commonly needs, and the module that declares each
+STDLIB_TYPES = {"Scene": "render.integrator", "Sampler": "render.integrator",
+                "Interaction": "render.geometry", "LightSample": "render.lights",
+                "PCG32": "pcg32"}
+
 
 class Declarations:
     """The first pass: struct layouts, type expressions and top-level function signatures.
@@ -84,14 +89,17 @@ class Declarations:
                 return t
             if te.name in self.struct_decls:
                 return self._struct(te.name, stack or [])
-            raise err(f"unknown type `{te.name}`", te.loc)
+            hint = STDLIB_TYPES.get(te.name)
+            raise err(f"unknown type `{te.name}`"
+                      + (f"; it is declared in the stdlib: add `import {hint};`" if hint else ""),
+                      te.loc)
         if isinstance(te, A.BufferTypeExpr):
             if ctx == "plugin_fn_param" or ctx == "plugin_param":
                 raise err("buffers cannot be used in plugins; a buffer type is only allowed "
                           "as a parameter of a top-level `fn`", te.loc)
-            if ctx != "top_param":
-                raise err("a buffer type is only allowed as a parameter of a top-level `fn`",
-                          te.loc)
+            if ctx not in ("top_param", "field"):
+                raise err("a buffer type is only allowed as a parameter of a top-level `fn` "
+                          "or as a struct field", te.loc)
             elem = self._type(te.elem, "other", stack)
             if not (isinstance(elem, ScalarType) and elem != BOOL):
                 raise err(f"buffer elements must be `Float`, `Int`, `UInt` or `UInt64`, "

@@ -200,6 +200,20 @@ class _FnLowerer:
             return self.op(loc, Op.MAKE, t, *(self.zero(loc, c) for c in ir.components(t)))
         raise TypeError(t)  # pragma: no cover
 
+    def plugin_default(self, loc: Loc, t: Type, value: Any) -> Value:
+        """A plugin param's default as IR constants (zero when it has none: the scene must
+        set it, which ``specialize`` checks)."""
+        t = ir_type(t)
+        if value is None:
+            return self.zero(loc, t)
+        if isinstance(t, ScalarType):
+            return self.const(loc, value, t)
+        if isinstance(value, tuple) and isinstance(t, SpectrumType) and len(value) == 3:
+            return self.op(loc, Op.SPEC_RGB, t, *(self.const(loc, v, F32) for v in value))
+        if isinstance(value, tuple):
+            return self.op(loc, Op.MAKE, t, *(self.const(loc, v, F32) for v in value))
+        return self.op(loc, Op.BROADCAST, t, self.const(loc, value, F32))
+
     def flag(self, name: str) -> Symbol:
         return Symbol(name, BOOL, "var", self.fn.decl.loc)
 
@@ -516,15 +530,20 @@ class _FnLowerer:
         target = e.target
         if isinstance(target, FnInfo):
             args = [self.expr(a) for a in e.args]
-            callee = target.ir_name
-            if target.plugin is not None:
+            attrs: dict[str, Any] = {"callee": target.ir_name}
+            if target.plugin is not None and target.plugin is self.plugin:
                 args += self.plugin_values
                 # a table read, except in a table's own definition (tables are filled
                 # independently of each other)
                 if target.name in target.plugin.tables and self.fn.decl.table is None:
-                    callee += ".read"
-            ins = self.b.emit(Op.CALL, args, [t] if t is not None else [],
-                              {"callee": callee}, loc=loc)
+                    attrs["callee"] += ".read"
+            elif target.plugin is not None:  # from outside: `specialize` binds the params
+                attrs["bound"] = len(args)
+                args += [self.plugin_default(loc, s.type, d)
+                         for s, d in zip(target.plugin.params, target.plugin.defaults)]
+                # and the tables' offsets (a table function called from outside computes)
+                args += [self.const(loc, -1, I32) for _ in target.plugin.tables]
+            ins = self.b.emit(Op.CALL, args, [t] if t is not None else [], attrs, loc=loc)
             return ins.results[0] if ins.results else None
         kind, what = target
         if kind == "texture":

@@ -59,6 +59,8 @@ def cache_key(source_text: str, files: Iterable[os.PathLike | str], build: Build
     part("target", build.target.name)
     part("variant", build.model.name)
     part("width", str(build.width))
+    if build.ad is not None:  # keys of builds without AD stay as they were
+        part("ad", build.ad)
     part("options", json.dumps(options, sort_keys=True, default=repr))
     part("source", source_text)
     for f in files:

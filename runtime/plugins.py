@@ -1,15 +1,15 @@
-"""The plugin registry: which ``.rdsl`` file declares the BSDF, texture or emitter a scene
+"""The plugin registry: which ``.rdsl`` file declares the BSDF, texture, emitter or integrator a scene
 names with ``type="NAME"``, and that declaration's ``param``s.
 
 A scene's plugin is looked up, in order, in: the scene file's folder, the folders given to
 ``load_scene(plugins=...)`` / ``rdsl render --plugins DIR`` (or a plugin file given there),
 the folders of ``$RDSL_PLUGIN_PATH`` (``os.pathsep``-separated), the files registered with
 :func:`register_plugin`, then the stdlib (``stdlib/bsdf``, ``stdlib/texture``,
-``stdlib/emitter``).  The first place that declares it wins; a plugin it shadows is named in
+``stdlib/emitter``, ``stdlib/integrator``).  The first place that declares it wins; a plugin it shadows is named in
 a warning, and two files of one folder declaring the same name are an error naming both.
 
 Finding is cheap: the top-level ``*.rdsl`` files of a folder are indexed with a regular
-expression over ``bsdf|texture|emitter NAME {`` lines; only the files a scene uses are
+expression over ``bsdf|texture|emitter|integrator NAME {`` lines; only the files a scene uses are
 parsed and checked by the compiler (:meth:`PluginDecl.params`), so a syntax error or a
 missing interface function is the compiler's diagnostic at its own line.
 
@@ -35,14 +35,14 @@ from ..compiler.diagnostics import CompileError
 from ..compiler.ir import Loc
 from ..compiler.sources import is_path
 
-KINDS = ("bsdf", "texture", "emitter")
+KINDS = ("bsdf", "texture", "emitter", "integrator")
 STDLIB = Path(__file__).resolve().parents[1] / "stdlib"
 ENV = "RDSL_PLUGIN_PATH"
 # stdlib plugins the renderer instantiates itself, never a scene (a tree of combinators is one
 # `mixture`); written as `{name}_{method}_buffers` functions rather than a `bsdf` block, so
 # found by their file
 INTERNAL = {"mixture": "bsdf/mixture.rdsl"}
-_DECL = re.compile(r"^[ \t]*(bsdf|texture|emitter)[ \t]+([A-Za-z_]\w*)[ \t]*\{", re.MULTILINE)
+_DECL = re.compile(r"^[ \t]*(bsdf|texture|emitter|integrator)[ \t]+([A-Za-z_]\w*)[ \t]*\{", re.MULTILINE)
 # the language's keywords (dsl/parser.py): a file named like one cannot be imported
 _KEYWORDS = frozenset({"import", "struct", "fn", "param", "let", "var", "if", "else", "const",
                        "for", "in", "while", "break", "continue", "return", "true", "false"})
@@ -72,8 +72,8 @@ class PluginDecl:
     path: Path
     line: int
     stdlib: bool = False
-    _checked: tuple[dict[str, ParamDecl], frozenset[str]] | None = field(default=None,
-                                                                         repr=False)
+    _checked: tuple[dict[str, ParamDecl], dict[str, tuple[tuple[Any, ...], Any]]] | None = \
+        field(default=None, repr=False)
 
     @property
     def where(self) -> str:
@@ -93,7 +93,11 @@ class PluginDecl:
     def has_fn(self, name: str) -> bool:
         return name in self._check()[1]
 
-    def _check(self) -> tuple[dict[str, ParamDecl], frozenset[str]]:
+    def signature(self, name: str) -> tuple[tuple[Any, ...], Any]:
+        """The IR parameter types and result type of the plugin's function ``name``."""
+        return self._check()[1][name]
+
+    def _check(self) -> tuple[dict[str, ParamDecl], dict[str, tuple[tuple[Any, ...], Any]]]:
         if self._checked is None:
             self._checked = _checked(self.path.resolve(), self.kind, self.name, self.line,
                                      self.path.stat().st_mtime_ns)
@@ -110,16 +114,17 @@ def declared_params(plugin: Any) -> list[ParamDecl]:
 
 @cache
 def _checked(path: Path, kind: str, name: str, line: int, mtime: int
-             ) -> tuple[dict[str, ParamDecl], frozenset[str]]:
-    """The params and function names of plugin ``name`` of ``path``, which the compiler's
-    frontend checks (its diagnostics point into the file).  ``mtime`` keys the cache, so an
-    edited file is read again."""
+             ) -> tuple[dict[str, ParamDecl], dict[str, tuple[tuple[Any, ...], Any]]]:
+    """The params and functions (parameter and result types) of plugin ``name`` of
+    ``path``, which the compiler's frontend checks (its diagnostics point into the file).
+    ``mtime`` keys the cache, so an edited file is read again."""
     from ..dsl import check
 
     prog = check(path)
     for pl in prog.plugins:
         if pl.name == name and pl.module.key == str(path):
-            return {q.name: q for q in declared_params(pl)}, frozenset(pl.fns)
+            fns = {n: (tuple(f.param_types), f.ret) for n, f in pl.fns.items()}
+            return {q.name: q for q in declared_params(pl)}, fns
     raise CompileError(f"`{kind} {name}` seems declared here, but the file declares no such "
                        "plugin (is the line inside a comment?)", Loc(str(path), line, 1))
 
@@ -347,7 +352,9 @@ def declared_spec(decl: PluginDecl) -> Any:
                                       for r in UV_ROWS):
         rows = [params.pop(r) for r in UV_ROWS]
         params["to_uv"] = Param("transform", None, None, "Vec3 rows to_u, to_v", rows[0].decl)
-    return PluginSpec(decl.kind, decl.name, params, {}, decl)
+    # an integrator may wrap one nested integrator (when its `sample` takes `nested`)
+    children = {"integrator": (0, 1)} if decl.kind == "integrator" else {}
+    return PluginSpec(decl.kind, decl.name, params, children, decl)
 
 
 def scene_spec(registry: PluginRegistry, category: str, ptype: str) -> Any:

@@ -432,6 +432,7 @@ def test_plugin_contract() -> None:
 
 def test_plugin_kinds() -> None:
     m = lower("""
+import render.integrator;
 emitter point {
     param intensity: Spectrum = 1.0;
     param pos: Vec3 = 0.0;
@@ -452,8 +453,8 @@ texture checker {
     }
 }
 integrator depth {
-    fn li(ray: Ray, seed: UInt) -> Spectrum {
-        let h = trace(ray);
+    fn sample(scene: Scene, ray: Ray, sampler: Sampler) -> Spectrum {
+        let h = scene.trace(ray);
         if !h.valid { return Spectrum(0.0); }
         return Spectrum(h.t);
     }
@@ -461,9 +462,10 @@ integrator depth {
 """)
     assert m.functions["point.sample"].attrs["kind"] == "emitter"
     assert m.functions["checker.eval"].params[1].default == 4.0
-    li = m.functions["depth.li"]
-    assert li.params[1].value.type == U32
-    assert Op.INTERSECT in ops(li)
+    sample = m.functions["depth.sample"]
+    assert sample.params[2].value.type.name == "Sampler"
+    assert any(i.op is Op.CALL and i.attrs["callee"].startswith("trace")
+               for i in sample.walk())
 
 
 def test_imports(tmp_path: Path) -> None:

@@ -62,6 +62,7 @@ bsdf diffuse {
 }
 """,
     """
+import render.integrator;
 fn hash(x: UInt) -> UInt {
     var h = x ^ 0x2545F491u;
     h = (h ^ (h >> 16u)) * 0x45d9f3bu;
@@ -78,10 +79,11 @@ fn early(x: Float) -> Float {
 }
 integrator depth {
     param max_depth: Int = 4;
-    fn li(ray: Ray, seed: UInt) -> Spectrum {
-        let si = trace(ray);
+    fn sample(scene: Scene, ray: Ray, sampler: Sampler) -> Spectrum {
+        let si = scene.trace(ray);
         if !si.valid { return Spectrum(0.0); }
-        return Spectrum(si.t + Float(hash(seed)) * 1e-9);
+        let (s1, u) = sampler.next_1d();
+        return Spectrum(si.t + u * 1e-9);
     }
 }
 """,

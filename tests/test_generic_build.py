@@ -26,7 +26,7 @@ def same_image(path: Path, spp: int = 4, seed: int = 3, **defaults) -> str:
     a = load_scene(path, **defaults)
     b = load_scene(path, specialize=False, **defaults)
     ia, ib = a.render(spp=spp, seed=seed), b.render(spp=spp, seed=seed)
-    assert b.params.size > 0  # the generic kernel did read its parameters at run time
+    assert b.prm.size > 0  # the generic kernel did read its parameters at run time
     assert ia.shape == ib.shape and a.nonfinite == b.nonfinite
     if np.array_equal(ia, ib):
         return "bit for bit"
@@ -116,7 +116,8 @@ def test_report_compares_instruction_counts(tmp_path, capsys):
     assert m, text
     spec, generic = int(m[1]), int(m[2])
     assert spec < generic, text
-    assert "parameters: 12 values of 4 instance(s) folded as constants" in text
+    # 3 diffuse colours, the light's radiance and the path integrator's 3 params
+    assert "parameters: 15 values of 5 instance(s) folded as constants" in text
     assert "sampling code for point, spot, directional, constant, envmap folded away" in text
     print(m[0])
 
@@ -188,7 +189,7 @@ def test_spectral_tabulated_spectra_are_read_from_prm(tmp_path, monkeypatch):
     assert [s.from_cache for s in generic] == [False, True]  # one compile serves both
     # four tabulated spectra in PRM, none among the code's constant tables (only the CIE
     # and D65 curves, 95 samples each), read at varying offsets
-    assert generic[0].params.size >= 4 * spectral.GENERIC_SLOT
+    assert generic[0].prm.size >= 4 * spectral.GENERIC_SLOT
     build = generic[0].build
     module, _ = compile_kernels(generic[0].kernel_src, build,
                                 scene=parameter_slots(generic[0].scene_spec, build.model)[0])

@@ -1,4 +1,4 @@
-"""Mitsuba 3's `direct` and `aov` integrators (stdlib/render/direct.rdsl, aov.rdsl)."""
+"""Mitsuba 3's `direct` and `aov` integrators (stdlib/integrator/direct.rdsl, aov.rdsl)."""
 
 from __future__ import annotations
 

@@ -114,3 +114,34 @@ def test_an_if_giving_the_same_value_on_both_sides_folds():
     assert not any(i.op is Op.IF for i in m.functions["k"].walk())
     got = rdsl.jit(src, target="scalar").k(np.float32([1.5, -2.0]), np.array([True, False]))
     np.testing.assert_array_equal(got, [1.5, -2.0])
+
+
+PLUGIN_CALL = """
+integrator gain {
+    param scale: Float = 2.0;
+    param offset: Spectrum = Spectrum(0.0, 0.5, 1.0);
+    fn apply(x: Float) -> Spectrum { return Spectrum(x * scale) + offset; }
+    fn sample(scene: Scene, ray: Ray, sampler: Sampler) -> Spectrum { return offset; }
+}
+fn k(x: Float) -> Spectrum { return gain.apply(x); }
+"""
+
+
+@pytest.mark.parametrize("specialize", [True, False])
+def test_a_plugin_called_by_name_gets_the_scene_instance_params(specialize):
+    """`gain.apply(x)` from a top-level function: the plugin's defaults without a scene,
+    the scene's instance's values with one (folded, or read from PRM in the generic build)."""
+    src = "import render.integrator;\n" + PLUGIN_CALL
+    x = np.float32([1.0, -2.0])
+    plain = rdsl.jit(src, target="scalar").k(x)
+    np.testing.assert_allclose(plain, [[2.0, 2.5, 3.0], [-4.0, -3.5, -3.0]])
+    scene = SceneSpec(integrators=[Instance("gain", {"scale": 3.0})])
+    if specialize:
+        got = rdsl.jit(src, target="scalar", scene=scene).k(x)
+    else:
+        from rdsl.compiler.passes.specialize import parameter_slots
+
+        generic, prm = parameter_slots(scene)
+        assert list(prm) == [3.0]
+        got = rdsl.jit(src, target="scalar", scene=generic).k(x, prm)
+    np.testing.assert_allclose(got, [[3.0, 3.5, 4.0], [-6.0, -5.5, -5.0]])

@@ -191,3 +191,31 @@ def test_ctrl_c_ends_the_command_with_status_0(tmp_path, monkeypatch, capsys):
     text = capsys.readouterr().out
     assert "watching" in text and text.rstrip().endswith("watch: stopped")
     assert out.is_file() and (tmp_path / "o.png").is_file()
+
+
+def test_a_new_plugin_file_next_to_the_scene_is_seen(tmp_path):
+    """A .rdsl file added to the scene's folder may change what a name resolves to: here a
+    user `diffuse` that shadows the stdlib's (and reflects half as much)."""
+    import warnings
+
+    path = tmp_path / "cbox.xml"
+    path.write_text(CBOX.read_text())
+    out = tmp_path / "out.exr"
+    scene, job, out_text, err_text = first_render(path, out)
+    before = read_exr(out)
+    w = Watcher(scene, job, out_text, err_text)
+    stdlib = Path(__file__).resolve().parents[1] / "stdlib" / "bsdf" / "diffuse.rdsl"
+    half = stdlib.read_text().replace("depolarized(reflectance(si)",
+                                      "depolarized(0.5 * reflectance(si)")
+    assert half.count("0.5 * reflectance") == 2
+
+    def edit(i: int) -> None:
+        if i == 0:
+            write(tmp_path / "diffuse.rdsl", half)
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # the shadowing warning
+        assert w.run(poll=0.01, max_updates=1, on_poll=edit) == 0
+    after = read_exr(out)
+    assert after.mean() < 0.8 * before.mean()
+    assert "changed: scene reloaded" in out_text.getvalue(), out_text.getvalue()

@@ -26,7 +26,11 @@ from . import Pass, register
 class Inline(Pass):
     name = "inline"
 
-    def __init__(self, keep: Callable[[Module], set[str]] | None = None) -> None:
+    def __init__(self, mark_partials: bool = False,
+                 keep: Callable[[Module], set[str]] | None = None) -> None:
+        # for automatic differentiation: each call of a math function with declared partial
+        # derivatives (ad_forward.PARTIALS) leaves an `ad.rule` giving them
+        self.mark_partials = mark_partials
         self.keep_fn = keep
 
     def run(self, module: Module) -> None:
@@ -53,7 +57,14 @@ class Inline(Pass):
             raise CompileError([Diagnostic(loc, f"recursion is not supported: {pretty}")])
         self.stack.append((fn.name, site))
         mapping: dict[Value, Value] = {}
+        marking = self.mark_partials
+        if marking:  # a partial derivative's own calls (pow_d0 calls pow) are not marked
+            from .ad_forward import PARTIALS
+
+            helpers = {h for names in PARTIALS.values() for h in names}
+            self.mark_partials = fn.attrs.get("source_name") not in helpers
         self._inline_block(fn.body, mapping)
+        self.mark_partials = marking
         replace_uses(fn.body, mapping)
         self.stack.pop()
         self.done.add(fn.name)
@@ -82,7 +93,31 @@ class Inline(Pass):
             out.extend(body.instrs)
             for res, val in zip(ins.results, ret.operands):
                 mapping[res] = val
+            if self.mark_partials:
+                self._mark(callee, args, ins, mapping, out)
         block.instrs = out
+
+    def _mark(self, callee: Function, args: list[Value], call: Instr,
+              mapping: dict[Value, Value], out: list[Instr]) -> None:
+        """After an inlined call of a function with declared partials: inline the partials
+        too and wrap the result in an ``ad.rule`` (``ad_forward`` applies them)."""
+        from .ad_forward import PARTIALS
+
+        names = PARTIALS.get(callee.attrs.get("source_name", ""))
+        if not names or len(names) != len(args) or len(call.results) != 1:
+            return
+        partials = []
+        for name in names:
+            helper = self.module.functions[name]
+            self._inline_function(helper, call)
+            body = clone_block(helper.body, {p.value: a for p, a in zip(helper.params, args)})
+            ret = body.instrs.pop()
+            out.extend(body.instrs)
+            partials.append(ret.operands[0])
+        y = mapping[call.results[0]]
+        rule = Instr(Op.AD_RULE, [*args, y, *partials], [y.type], {}, loc=call.loc)
+        out.append(rule)
+        mapping[call.results[0]] = rule.result
 
 
 def _still_called(module: Module) -> set[str]:

@@ -154,13 +154,15 @@ def parameter_slots(scene: SceneSpec, model: ColorModel = RGB
 
     # emitter_kinds and shape_kinds stay None: the generic build handles every kind
     spec = SceneSpec(instances("bsdfs"), instances("emitters"), instances("textures"),
-                     instances("bsdf_leaves"))
+                     instances("bsdf_leaves"), integrators=instances("integrators"))
     return spec, np.asarray(values, np.float32)
 
 
 def describe(scene: SceneSpec, placeholders: list[str] | None = None) -> list[str]:
     """One line per placeholder: which instances its dispatch covers."""
     out = []
+    if placeholders is None and scene.integrators:
+        out.append("integrators: " + ", ".join(i.plugin for i in scene.integrators))
     for name in placeholders if placeholders is not None else list(PLACEHOLDERS):
         kind, _ = PLACEHOLDERS[name]
         instances: list[Instance] = getattr(scene, kind)
@@ -189,12 +191,14 @@ class Specialize(Pass):
             if placeholder is None:
                 continue
             self._dispatch(module, placeholder, kind, method)
-        self._read_tables(module)
         for name, present in ((EMITTER_KIND_PLACEHOLDER, self.scene.emitter_kinds),
                               (SHAPE_KIND_PLACEHOLDER, self.scene.shape_kinds)):
             kinds = module.functions.get(name)
             if kinds is not None and present is not None:
                 kinds.body = _kind_test(kinds, present)
+        for fn in list(module.functions.values()):
+            self._bind_calls(module, fn, fn.body)
+        self._read_tables(module)
         if self._prm:
             for name, prm in self._prm.items():
                 if module.functions[name].params[-1].value is not prm:
@@ -202,6 +206,34 @@ class Specialize(Pass):
             _thread_buffer(module, PARAM_BUFFER)
         self.report.extend(describe(self.scene, [n for n in PLACEHOLDERS
                                                  if n in module.functions]))
+
+    def _bind_calls(self, module: Module, fn: Function, block: Block) -> None:
+        """Give each call of a plugin's function from outside the plugin (``path.sample(...)``
+        in the render kernel: a call with a ``bound`` attribute, whose params are the
+        defaults) the params of the scene's instance of that plugin."""
+        out: list[Instr] = []
+        for ins in block.instrs:
+            for region in ins.regions:
+                self._bind_calls(module, fn, region)
+            if ins.op is Op.CALL and "bound" in ins.attrs:
+                n = ins.attrs.pop("bound")
+                callee = module.functions[ins.attrs["callee"]]
+                plugin = callee.attrs.get("plugin", "?")
+                inst = next((i for i in self.scene.integrators if i.plugin == plugin),
+                            Instance(plugin))
+                pre = Builder(Block(), ins.loc)
+                ident = pre.const(0, I32)
+                defaults = {p.value.name: p.default for p in callee.params}
+                k = next((j for j, i in enumerate(self.scene.integrators) if i is inst), None)
+                ins.operands[n:] = [
+                    self._table_offset(pre, module, p, ident, "integrators", [k], callee)
+                    if k is not None and _is_table_slot(module, plugin, p) else
+                    self._param_value(pre, p, ident, [inst], [0], defaults.get(p.value.name),
+                                      module, fn, {})
+                    for p in callee.params[n:]]
+                out += pre.block.instrs
+            out.append(ins)
+        block.instrs = out
 
     def _dispatch(self, module: Module, placeholder: Function, kind: str, method: str) -> None:
         """Dispatch over the plugin *types* of the scene's ``kind`` instances; the parameters
@@ -404,7 +436,8 @@ class _Tables:
 
 def _slots_end(scene: SceneSpec) -> int:
     """The size of the generic build's ``PRM`` without tables: the end of its last slot."""
-    ends = [v.offset + v.size for kind in ("bsdfs", "emitters", "textures", "bsdf_leaves")
+    ends = [v.offset + v.size
+            for kind in ("bsdfs", "emitters", "textures", "bsdf_leaves", "integrators")
             for inst in getattr(scene, kind) for v in inst.params.values()
             if isinstance(v, Slot)]
     return max(ends, default=0)

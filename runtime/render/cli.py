@@ -79,7 +79,10 @@ def render_command(args: Any) -> int:
                        triangulate=getattr(args, "triangulate", False),
                        plugins=getattr(args, "plugins", []), **defines)
     t_load = time.perf_counter() - t0
-    if not scene.buffers.nlight:
+    integ = scene.desc.integrator
+    lit = [i for i in [integ, *integ.children] if i.type in ("path", "direct")
+           and (i.decl is None or i.decl.stdlib)]  # a user's integrator may need no light
+    if not scene.buffers.nlight and lit:
         print(f"{scene_path}: warning: the scene has no emitters; the image will be black",
               file=sys.stderr)
     mod = scene.compile()

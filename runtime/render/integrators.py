@@ -1,18 +1,23 @@
-"""The scene's integrator, as the render kernel calls it: which stdlib function computes the
-radiance (``path_li`` in stdlib/render/path.rdsl, ``direct_li`` in direct.rdsl) and which AOV
-channels (stdlib/render/aov.rdsl) follow it on the film.
+"""The scene's integrator as the render kernel calls it: which integrator plugins run per
+camera ray, and which AOV channels follow the radiance on the film.
 
-Mitsuba 3's ``aov`` integrator writes the nested integrator's RGB as the image's base
-channels (0 without one) and then one channel group per ``name:type`` entry of ``aovs``,
-named as aov.cpp names them (``dd.y:depth`` -> ``dd.y.T``, ``nn:sh_normal`` ->
-``nn.X``, ``nn.Y``, ``nn.Z``).  This module only parses and names; the per-sample values
-are computed in rdsl.
+An integrator is a plugin (``integrator NAME { fn sample(scene, ray, sampler) ... }``,
+stdlib/render/integrator.rdsl), found like any other by the scene's plugin registry: the
+stdlib's ``path``, ``direct``, ``aov`` and ``stokes`` (stdlib/integrator/) or a user's.  One
+that takes a last argument ``nested: Spectrum`` wraps the integrator nested in it in the XML
+(0 without one), as Mitsuba 3's ``aov`` and ``stokes`` do; the kernel runs the nested one
+first and hands its estimate over.  Whichever returns ``(Spectrum, A)`` gives the AOVs: each
+field of the struct ``A`` becomes channels, in order, named ``field`` (a Float),
+``field.U``/``.V`` (Vec2), ``field.X``/``.Y``/``.Z`` (Vec3) or ``field.R``/``.G``/``.B``
+(Spectrum).
 
-Mitsuba 3's ``stokes`` integrator (integrators/stokes.cpp) nests exactly one integrator and,
-in polarized variants, writes the Stokes vector of its estimate, turned into the sensor's
-frame (stdlib/render/stokes.rdsl), as twelve channels ``S0.R, S0.G, S0.B, ..., S3.B`` after
-the base ones (R = G = B in mono).  In unpolarized variants Mitsuba refuses it ("This
-integrator should only be used in polarized mode!"), and so does ``check_variant`` here.
+Mitsuba's ``aov`` integrator names its channels itself: its ``aovs`` property (``name:type``
+entries) picks fields of ``A`` by type and names them as aov.cpp does (``dd.y:depth`` ->
+``dd.y.T``, ``nn:sh_normal`` -> ``nn.X``, ``nn.Y``, ``nn.Z``).  Mitsuba's ``stokes``
+integrator writes the Stokes vector of its nested estimate as ``S0.R, S0.G, ..., S3.B``; in
+unpolarized variants Mitsuba refuses it ("This integrator should only be used in polarized
+mode!"), and so does :meth:`IntegratorPlan.check_variant`.  This module only plans and
+names; the per-sample values are computed in rdsl.
 """
 
 from __future__ import annotations
@@ -21,14 +26,15 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from ...compiler.diagnostics import CompileError
+from ...compiler.ir import F32, SpectrumType, StructType, Type, VecType
 from ...core.color import ColorModel
+from ...core.scene_spec import Instance
 
-__all__ = ["AOV_TYPES", "INTEGRATORS", "STOKES_CHANNELS", "IntegratorPlan", "integrator_plan"]
+__all__ = ["AOV_TYPES", "AovChannel", "IntegratorPlan", "integrator_instances",
+           "integrator_plan"]
 
-INTEGRATORS = ("path", "direct", "aov", "stokes")
-RADIANCE = ("path", "direct")
-# AOV type -> its channels' suffixes (the kernel's rdsl expressions of them:
-# runtime/render/kernel_source.py)
+# Mitsuba's aov types -> the field of stdlib/integrator/aov.rdsl's `Aov`, and the channel
+# suffixes aov.cpp gives them
 AOV_TYPES: dict[str, tuple[str, ...]] = {
     "depth": ("T",),
     "position": ("X", "Y", "Z"),
@@ -37,95 +43,182 @@ AOV_TYPES: dict[str, tuple[str, ...]] = {
     "uv": ("U", "V"),
     "albedo": ("R", "G", "B"),
 }
-# the `stokes` integrator's channels, in Mitsuba's order (stokes.cpp `aov_names`)
-STOKES_CHANNELS = tuple(f"S{i}.{c}" for i in range(4) for c in "RGB")
+_SUFFIXES = {2: ("U", "V"), 3: ("X", "Y", "Z")}
+POLARIZED_ONLY = ("stokes",)  # Mitsuba refuses these in unpolarized variants
+
+
+@dataclass(frozen=True)
+class AovChannel:
+    """One AOV field of the integrator's struct as image channels: the field, its type and
+    the channel names."""
+
+    field: str
+    type: Type
+    names: tuple[str, ...]
 
 
 @dataclass
 class IntegratorPlan:
     """What the render kernel computes per sample: the radiance integrator (None: black),
-    the AOVs as (name, type) pairs, and whether a ``stokes`` integrator writes S0..S3
-    (``stokes``: its XML node, for diagnostics)."""
+    the integrator wrapping it (None: none), each a loader node with its plugin declaration
+    (``.decl``), and the AOV channels of whichever returns AOVs."""
 
     radiance: Any | None
-    aovs: list[tuple[str, str]] = field(default_factory=list)
-    stokes: Any | None = None
+    wrapper: Any | None = None
+    aovs: list[AovChannel] = field(default_factory=list)
+
+    @property
+    def aov_source(self) -> Any | None:
+        """The integrator whose ``sample`` returns the AOVs."""
+        return next((i for i in (self.wrapper, self.radiance)
+                     if i is not None and aov_struct(i) is not None), None)
 
     def aov_channel_names(self) -> list[str]:
-        """The channels after the base ones, as the EXR names them, in film order: the Stokes
-        components first (as Mitsuba's stokes integrator inserts them), then the AOVs."""
-        return ([*STOKES_CHANNELS] if self.stokes is not None else []) + \
-            [f"{name}.{s}" for name, kind in self.aovs for s in AOV_TYPES[kind]]
+        """The channels after the base ones, as the EXR names them, in film order."""
+        return [n for c in self.aovs for n in c.names]
 
     def check_variant(self, model: ColorModel) -> None:
         """A ``stokes`` integrator needs a polarized variant: an error at its XML otherwise."""
-        if self.stokes is not None and not model.polarized:
+        node = self.wrapper if self.wrapper is not None else self.radiance
+        if node is not None and node.type in POLARIZED_ONLY and not model.polarized:
             raise CompileError(
-                f"stokes: the Stokes integrator needs a polarized variant (`mono_polarized` or "
-                f"`spectral_polarized`); the `{model.name}` variant carries no polarization, so "
-                "there are no S0..S3 channels to write and nothing is rendered (Mitsuba 3 "
+                f"{node.type}: the Stokes integrator needs a polarized variant (`mono_polarized` "
+                f"or `spectral_polarized`); the `{model.name}` variant carries no polarization, "
+                "so there are no S0..S3 channels to write and nothing is rendered (Mitsuba 3 "
                 "refuses it too: \"This integrator should only be used in polarized mode!\"). "
                 "Render with a polarized variant, or use the nested integrator directly.",
-                self.stokes.loc)
+                node.loc)
 
 
-def _check_radiance(integ: Any) -> None:
-    if integ.type in ("aov", "stokes"):
-        raise CompileError(f"{integ.type}: an `{integ.type}` integrator cannot be nested in "
-                           "another one by the renderer yet", integ.loc)
-    if integ.type not in RADIANCE:
-        raise CompileError(f"integrator `{integ.type}` is not supported by the renderer yet "
-                           f"(supported: {', '.join(INTEGRATORS)})", integ.loc)
-    if integ.type == "direct":
-        p = integ.params
-        if p.get("shading_samples") is not None and (p.get("emitter_samples") is not None
-                                                     or p.get("bsdf_samples") is not None):
-            raise CompileError("direct: cannot specify both 'shading_samples' and "
-                               "('emitter_samples' and/or 'bsdf_samples')", integ.loc)
-        es, bs = direct_samples(integ)
-        if es < 0 or bs < 0 or es + bs == 0:
-            raise CompileError("direct: must have at least 1 BSDF or emitter sample "
-                               "(and no negative counts)", integ.loc)
+def _decl(integ: Any) -> Any:
+    decl = getattr(integ, "decl", None)
+    if decl is None:
+        from ..plugins import stdlib_plugin
+
+        decl = stdlib_plugin("integrator", integ.type)
+    if decl is None:
+        raise CompileError(f"unknown integrator `{integ.type}`: no plugin file declares "
+                           "`integrator " + integ.type + " { ... }`", integ.loc)
+    return decl
 
 
-def direct_samples(integ: Any) -> tuple[int, int]:
-    """``direct``'s (emitter_samples, bsdf_samples), defaulting to ``shading_samples`` (1)."""
-    p = integ.params
-    shading = p.get("shading_samples")
-    shading = 1 if shading is None else int(shading)
-    es, bs = p.get("emitter_samples"), p.get("bsdf_samples")
-    return (shading if es is None else int(es)), (shading if bs is None else int(bs))
+def nests(integ: Any) -> bool:
+    """Whether the integrator's ``sample`` takes the nested integrator's estimate."""
+    params, _ = _decl(integ).signature("sample")
+    return len(params) == 4
 
 
-def integrator_plan(integ: Any) -> IntegratorPlan:
-    """Parse the scene's integrator; unsupported ones raise a CompileError at their XML."""
-    if integ.type == "stokes":
-        nested = list(integ.children)
-        if len(nested) != 1:  # the loader's schema already says so; kept for Plugin objects
-            raise CompileError("stokes: must specify exactly one sub-integrator "
-                               f"(got {len(nested)})", integ.loc)
-        _check_radiance(nested[0])
-        return IntegratorPlan(nested[0], stokes=integ)
-    if integ.type != "aov":
-        _check_radiance(integ)
-        return IntegratorPlan(integ)
-    nested = list(integ.children)
-    if len(nested) > 1:
-        raise CompileError("aov: the renderer supports at most one nested integrator "
-                           f"(got {len(nested)})", integ.loc)
-    for child in nested:
-        _check_radiance(child)
-    aovs: list[tuple[str, str]] = []
-    for token in str(integ.params["aovs"]).split(","):
+def aov_struct(integ: Any) -> StructType | None:
+    """The struct of AOVs the integrator's ``sample`` returns beside the radiance, if any."""
+    _, ret = _decl(integ).signature("sample")
+    elems = getattr(ret, "elems", None)
+    return elems[1] if elems is not None else None
+
+
+def _channels(integ: Any, struct: StructType) -> list[AovChannel]:
+    """Every field as channels, or the ones an ``aovs`` property (Mitsuba's aov syntax)
+    picks and names."""
+    fields = dict(struct.fields)
+    spec = integ.params.get("aovs")
+    if spec is None:
+        return [AovChannel(f, t, _names(f, t)) for f, t in struct.fields]
+    out = []
+    for token in str(spec).split(","):
         token = token.strip()
         if not token:
             continue
         item = token.split(":")
         if len(item) != 2 or not item[0] or not item[1]:
-            raise CompileError(f"aov: invalid AOV specification `{token}`: require "
+            raise CompileError(f"{integ.type}: invalid AOV specification `{token}`: require "
                                "<name>:<type>", integ.loc)
-        if item[1] not in AOV_TYPES:
-            raise CompileError(f"aov: AOV type `{item[1]}` is not supported by the renderer "
-                               f"(supported: {', '.join(AOV_TYPES)})", integ.loc)
-        aovs.append((item[0], item[1]))
-    return IntegratorPlan(nested[0] if nested else None, aovs)
+        name, kind = item
+        if kind not in fields:
+            raise CompileError(f"{integ.type}: AOV type `{kind}` is not supported by the "
+                               f"renderer (supported: {', '.join(fields)})", integ.loc)
+        suffixes = AOV_TYPES.get(kind) or _suffixes(fields[kind])
+        out.append(AovChannel(kind, fields[kind], tuple(f"{name}.{s}" for s in suffixes)))
+    return out
+
+
+def _suffixes(t: Type) -> tuple[str, ...]:
+    if isinstance(t, SpectrumType):
+        return ("R", "G", "B")
+    if isinstance(t, VecType):
+        return _SUFFIXES[t.n]
+    return ()
+
+
+def _names(name: str, t: Type) -> tuple[str, ...]:
+    return (name,) if t == F32 else tuple(f"{name}.{s}" for s in _suffixes(t))
+
+
+def integrator_plan(integ: Any) -> IntegratorPlan:
+    """Plan the scene's integrator; what the renderer cannot run raises a CompileError at
+    its XML."""
+    _validate(integ)
+    nested = list(integ.children)
+    if not nests(integ):
+        if nested:
+            raise CompileError(f"{integ.type}: this integrator nests no other one (its "
+                               "`sample` takes no `nested: Spectrum`)", nested[0].loc)
+        plan = IntegratorPlan(integ)
+    else:
+        if len(nested) > 1:
+            raise CompileError(f"{integ.type}: the renderer supports at most one nested "
+                               f"integrator (got {len(nested)})", integ.loc)
+        if integ.type == "stokes" and len(nested) != 1:
+            raise CompileError("stokes: must specify exactly one sub-integrator "
+                               f"(got {len(nested)})", integ.loc)
+        inner = nested[0] if nested else None
+        if inner is not None:
+            _validate(inner)
+            if nests(inner):
+                raise CompileError(f"{inner.type}: an integrator that wraps another one "
+                                   f"cannot be nested in `{integ.type}` by the renderer yet",
+                                   inner.loc)
+            if aov_struct(inner) is not None and aov_struct(integ) is not None:
+                raise CompileError(f"{inner.type}: an integrator with AOVs cannot be nested "
+                                   f"in `{integ.type}`, which writes its own", inner.loc)
+        plan = IntegratorPlan(inner, integ)
+    source = plan.aov_source
+    if source is not None:
+        plan.aovs = _channels(source, aov_struct(source))
+    return plan
+
+
+def _validate(integ: Any) -> None:
+    """Mitsuba's checks of the ``direct`` integrator's sample counts."""
+    if integ.type != "direct" or getattr(integ, "decl", None) is not None and \
+            not integ.decl.stdlib:
+        return
+    p = integ.params
+    if p.get("shading_samples") is not None and (p.get("emitter_samples") is not None
+                                                 or p.get("bsdf_samples") is not None):
+        raise CompileError("direct: cannot specify both 'shading_samples' and "
+                           "('emitter_samples' and/or 'bsdf_samples')", integ.loc)
+    shading = p.get("shading_samples")
+    shading = 1 if shading is None else int(shading)
+    es, bs = p.get("emitter_samples"), p.get("bsdf_samples")
+    es, bs = (shading if es is None else int(es)), (shading if bs is None else int(bs))
+    if es < 0 or bs < 0 or es + bs == 0:
+        raise CompileError("direct: must have at least 1 BSDF or emitter sample "
+                           "(and no negative counts)", integ.loc)
+
+
+def integrator_instances(integ: Any) -> list[Instance]:
+    """The scene's integrators (the nested one after its wrapper) as plugin instances for
+    ``specialize``: the XML properties that set a declared ``param``."""
+    from .declared import declared_instance
+
+    out = []
+    for node in [integ, *integ.children]:
+        decl = _decl(node)
+        if not decl.stdlib:
+            out.append(declared_instance(node))
+            continue
+        declared = decl.params()
+        params = {k: (bool(v) if declared[k].type == "Bool" else int(v)
+                      if declared[k].type == "Int" else v)
+                  for k, v in node.params.items() if k in declared and v is not None}
+        out.append(Instance(node.type, params, node.id or node.type))
+    return out

@@ -24,28 +24,23 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from ...compiler.diagnostics import CompileError
+from ...compiler.ir import SpectrumType, VecType
 from ...core.color import RGB, ColorModel
 from ..plugins import PluginDecl, kernel_imports, stdlib_plugin
 from .camera import camera_uniforms
 from .film import film_reach, film_uniforms
-from .integrators import IntegratorPlan, direct_samples, integrator_plan
+from .integrators import IntegratorPlan, integrator_plan
 
 if TYPE_CHECKING:
     from ...core.scene_spec import Instance
     from .renderer import SceneBuffers
 
-__all__ = ["AOV_EXPRESSIONS", "kernel_source", "literal", "scene_plugins"]
+__all__ = ["SCENE_BUFFERS", "kernel_source", "literal", "scene_plugins"]
 
 TEMPLATE = Path(__file__).resolve().parents[2] / "stdlib" / "render" / "kernel.rdsl.in"
-# AOV type -> rdsl expression of each channel, from the `Aov` struct `aov`
-# (stdlib/render/aov.rdsl); `albedo` is a Spectrum, written by _aov_fields
-AOV_EXPRESSIONS: dict[str, tuple[str, ...]] = {
-    "depth": ("aov.depth",),
-    "position": ("aov.position.x", "aov.position.y", "aov.position.z"),
-    "geo_normal": ("aov.geo_normal.x", "aov.geo_normal.y", "aov.geo_normal.z"),
-    "sh_normal": ("aov.sh_normal.x", "aov.sh_normal.y", "aov.sh_normal.z"),
-    "uv": ("aov.uv.x", "aov.uv.y"),
-}
+# the buffers of a `Scene` (stdlib/render/integrator.rdsl), the kernel's arguments of the
+# same names
+SCENE_BUFFERS = ("P", "N", "UV", "F", "G", "LC", "LT", "T", "EK", "E", "ENV")
 
 
 def literal(value: Any, struct: str | None = None) -> str:
@@ -87,9 +82,11 @@ def scene_plugins(desc: Any, bsdfs: list[Instance], emitters: list[Instance],
     """The import names of the plugins of the scene's instances, and the search paths that
     find the user plugins among them (for ``jit``)."""
     decls: list[PluginDecl] = []
+    integ = desc.integrator
     for kind, names in (("bsdf", {x.plugin for b in bsdfs for x in [b, *b.children]}),
                         ("emitter", {e.plugin for e in emitters}),
-                        ("texture", {t.plugin for t in textures})):
+                        ("texture", {t.plugin for t in textures}),
+                        ("integrator", {i.type for i in [integ, *integ.children]})):
         for name in sorted(names):
             decl = getattr(desc, "plugins", {}).get(name)
             if decl is None or decl.kind != kind:
@@ -100,59 +97,52 @@ def scene_plugins(desc: Any, bsdfs: list[Instance], emitters: list[Instance],
     return kernel_imports(decls, Path(desc.path).resolve().parent)
 
 
-def _imports(plan: IntegratorPlan, spectral: bool, plugins: list[str]) -> list[str]:
-    """The modules the kernel needs beyond path tracing, the camera and the film (and the
-    scene's ``plugins``)."""
-    modules = ["spectral"] if spectral else []
-    if plan.radiance is not None and plan.radiance.type == "direct":
-        modules.append("render.direct")
-    if plan.aovs:
-        modules.append("render.aov")
-    if plan.stokes is not None:
-        modules.append("render.stokes")
-    modules += sorted(plugins)
+def _imports(spectral: bool, plugins: list[str]) -> list[str]:
+    """The modules the kernel needs beyond the integrator API, the camera and the film: the
+    scene's ``plugins`` (its integrators among them)."""
+    modules = (["spectral"] if spectral else []) + sorted(plugins)
     return [f"import {m};" for m in modules]
 
 
 def _radiance_call(plan: IntegratorPlan, bufs: SceneBuffers) -> str:
-    """The kernel's line computing `L` (and, for AOVs, the `aov` struct)."""
-    integ = plan.radiance
-    lights = f"{bufs.nlight}, {bufs.lights.env}"
-    args = "P, N, UV, F, G, LC, LT, T, EK, E, ENV"
-    if integ is None:
-        line = "    let L = Spectrum(0.0);"
-    elif integ.type == "direct":
-        es, bs = direct_samples(integ)
-        hide = "true" if integ.params.get("hide_emitters") else "false"
-        line = f"    let (L, r3) = direct_li(ray, r2, {es}, {bs}, {hide}, {lights}, {args});"
+    """The kernel's lines computing `L` (and, with AOVs, the struct `sample_aovs`): the
+    scene handle, the sampler, then the integrators (the nested one first)."""
+    buffers = ", ".join(f"{b}: {b}" for b in SCENE_BUFFERS)
+    lines = [f"    let scene = Scene {{ {buffers},",
+             f"                         nemitter: {bufs.nlight}, env: {bufs.lights.env}, "
+             "up: cam.basis.t };",
+             "    let sampler = Sampler { rng: r2 };"]
+    radiance, wrapper = plan.radiance, plan.wrapper
+    source = plan.aov_source
+    if radiance is None:
+        lines.append("    let L0 = Spectrum(0.0);")
     else:
-        line = (f"    let (L, r3) = path_li(ray, r2, {int(integ.params.get('max_depth', -1))}, "
-                f"{int(integ.params.get('rr_depth', 5))}, {lights}, {args});")
-    if plan.aovs:
-        line += "\n    let aov = aov_sample(ray, P, N, UV, F, G, T);"
-    if plan.stokes is not None:  # the Stokes vector in the sensor's frame (as Mitsuba)
-        line += "\n    let Ls = stokes_sensor_frame(L, ray.d, cam.basis.t);"
-    return line
+        out = "(L0, sample_aovs)" if source is radiance else "L0"
+        lines.append(f"    let {out} = {radiance.type}.sample(scene, ray, sampler);")
+    if wrapper is None:
+        lines.append("    let L = L0;")
+    else:
+        out = "(L, sample_aovs)" if source is wrapper else "L"
+        lines.append(f"    let {out} = {wrapper.type}.sample(scene, ray, sampler, L0);")
+    return "\n".join(lines)
 
 
 def _aov_fields(plan: IntegratorPlan, channels: int, spectral: bool = False
                 ) -> list[tuple[str, str]]:
-    """(rdsl type, expression) of each FilmSample AOV field, in film channel order: the
-    Stokes components S0..S3 of a ``stokes`` integrator as RGB each (Mitsuba's layout; the
-    one value repeated in mono), then the AOVs."""
+    """(rdsl type, expression) of each FilmSample AOV field, in film channel order: a
+    Spectrum AOV as RGB (the one value repeated in mono, sRGB of the sampled wavelengths in
+    spectral), a Float, Vec2 or Vec3 one as one Float field per component."""
     fields = []
-    if plan.stokes is not None:
-        for i in range(4):
-            s = f"mueller_entry(Ls, {i}, 0)"
-            fields.append(("Vec3", f"to_srgb(Spectrum({s}) * wavelength_weight)" if spectral
-                           else f"Vec3(mean({s}))"))
-    for _, kind in plan.aovs:
-        if kind == "albedo":  # a Spectrum; mono repeats its one value in R, G and B
-            fields.append(("Vec3", "Vec3(mean(aov.albedo))") if channels == 1
-                          else ("Vec3", "to_srgb(aov.albedo * wavelength_weight)") if spectral
-                          else ("Spectrum", "aov.albedo"))
+    for aov in plan.aovs:
+        e = f"sample_aovs.{aov.field}"
+        if isinstance(aov.type, SpectrumType):
+            fields.append(("Vec3", f"Vec3(mean({e}))") if channels == 1
+                          else ("Vec3", f"to_srgb({e} * wavelength_weight)") if spectral
+                          else ("Spectrum", e))
+        elif isinstance(aov.type, VecType):
+            fields += [("Float", f"{e}.{c}") for c in "xyzw"[:aov.type.n]]
         else:
-            fields += [("Float", e) for e in AOV_EXPRESSIONS[kind]]
+            fields.append(("Float", e))
     return fields
 
 
@@ -180,9 +170,12 @@ def _film_holes(film: dict[str, Any]) -> dict[str, str]:
 
 
 def kernel_source(desc: Any, bufs: SceneBuffers, bsdfs: list[Instance],
-                  emitters: list[Instance], model: ColorModel = RGB) -> str:
+                  emitters: list[Instance], model: ColorModel = RGB,
+                  derivative: bool = False) -> str:
     """The scene's render kernel in rdsl: constants of this scene, stdlib code for the rest.
-    A spectral kernel samples its wavelengths first and gives the film linear sRGB."""
+    A spectral kernel samples its wavelengths first and gives the film linear sRGB.
+    ``derivative``: the film also gets the derivative of the radiance (``derivative(x)``,
+    along the parameter tangent of a forward-mode build), as channels after the AOVs."""
     spectral, channels = model.spectral, model.channels
     # a polarized L is a Mueller matrix: the film records the intensity (entry [0][0], the
     # first Stokes component for the unpolarized emitters), as Mitsuba's film does
@@ -191,16 +184,21 @@ def kernel_source(desc: Any, bufs: SceneBuffers, bsdfs: list[Instance],
     plan.check_variant(model)
     plugins, _ = scene_plugins(desc, bsdfs, emitters, bufs.textures)
     aov_fields = _aov_fields(plan, channels, spectral)
-    film = film_uniforms(desc.sensor.film, 1, channels=channels + len(plan.aov_channel_names()))
+    value_type = "Vec3" if spectral else "Unpolarized" if mono_pol else "Spectrum"
+    value = ("to_srgb(L * wavelength_weight)" if spectral else "unpolarized(L)"
+             if mono_pol else "L")
+    if derivative:
+        aov_fields.append((value_type, f"derivative({value})"))
+    film = film_uniforms(desc.sensor.film, 1, channels=channels * (1 + derivative)
+                         + len(plan.aov_channel_names()))
     seed_rng = (["    let (rng, u_wavelength) = next_1d(pcg32_seed(UInt64(seed), stream));",
                  "    let wavelength_weight = sample_wavelengths(u_wavelength);"] if spectral
                 else ["    let rng = pcg32_seed(UInt64(seed), stream);"])
     return fill({
         "scene_name": Path(desc.path).name,
-        "imports": "\n".join(_imports(plan, spectral, plugins)),
-        "value_type": "Vec3" if spectral else "Unpolarized" if mono_pol else "Spectrum",
-        "value": ("to_srgb(L * wavelength_weight)" if spectral else "unpolarized(L)"
-                  if mono_pol else "L"),
+        "imports": "\n".join(_imports(spectral, plugins)),
+        "value_type": value_type,
+        "value": value,
         "aov_fields": "".join(f"aov{k}: {t}, " for k, (t, _) in enumerate(aov_fields)),
         "aov_values": "".join(f"aov{k}: {e} * k, " for k, (_, e) in enumerate(aov_fields)),
         "camera": literal(camera_uniforms(desc.sensor), "Camera"),

@@ -22,11 +22,12 @@ import numpy as np
 
 from ...compiler.build import Build
 from ...compiler.diagnostics import CompileError
+from ...compiler.passes.ad_forward import TANGENT_BUFFER
 from ...compiler.passes.specialize import PARAM_BUFFER, describe, parameter_slots
-from ..tables import fill_tables
 from ...compiler.targets import Target
 from ...core.color import RGB, ColorModel
 from ...core.scene_spec import Instance, SceneSpec
+from ..tables import fill_tables
 from ..scene import load_scene_description
 from ..scene.reads import recording
 from .bsdfs import (
@@ -37,10 +38,11 @@ from .bsdfs import (
 )
 from .colors import spectrum_value
 from .declared import declared_instance
+from .differentiable import SceneParams, gradient, render_forward
 from .emitters import KINDS as EMITTER_KINDS
 from .emitters import EmitterTables, emitter_tables
 from .film import develop, film_uniforms, new_accumulator
-from .integrators import integrator_plan
+from .integrators import integrator_instances, integrator_plan
 from .kernel_source import kernel_source, scene_plugins
 from .progress import Progress
 from .shapes import FLAGS as SHAPE_FLAGS
@@ -117,6 +119,8 @@ def flatten(desc: Any, triangulate: bool = False, model: ColorModel = RGB
         if shape.emitter is not None:
             emitter = len(emitters)
             emitters.append(_area_instance(shape.emitter, textures))
+            # named as Mitsuba's traverse names it (`light.emitter.radiance`)
+            emitters[-1].name = f"{shape.id or f'shape{shape_index}'}.emitter"
         analytic = None if triangulate else shape.analytic
         if analytic is not None:  # G's first entry is set below, with the records
             meshes.append(user_geometry(analytic))
@@ -206,6 +210,9 @@ class Scene:
     """A loaded scene, compiled for one build (target and colour model).  ``render``
     returns the image as a float32 (H, W, C) array."""
 
+    derivative = False  # the forward-mode twin's film also takes d(radiance)
+    tangents: np.ndarray | None = None  # its dPRM
+
     def __init__(self, path: str | Path, build: Build, specialize: bool = True,
                  triangulate: bool = False, plugins: Any = (), **defaults: Any) -> None:
         self.path = Path(path)
@@ -259,7 +266,8 @@ class Scene:
             # shapes, such as the Cornell box, trace about a third faster than through one
             # BVH over all triangles (bench/render_vs_mitsuba.py)
             self.embree = EmbreeScene(self.buffers.meshes, quality="low", mesh_quality="high")
-        self.params = np.zeros(1, np.float32)  # PRM of the generic build
+        self.prm = np.zeros(1, np.float32)  # PRM of the generic build
+        self._prm_set = False  # a value of PRM was assigned (scene.params[...] = ...)
         self._module = None
         self.report: list[str] = []
         self.compile_seconds = 0.0
@@ -274,11 +282,8 @@ class Scene:
         if self._module is not None and not again:
             return self._module
         src = kernel_source(self.desc, self.buffers, self.bsdfs, self.emitters,
-                            self.build.model)
-        bsdfs, leaves = split_leaves(self.bsdfs)  # combinators reach leaves by id
-        kinds = tuple(sorted({int(k) for k in self.buffers.lights.EK[0::4]}))
-        shapes = tuple(sorted({_shape_kind(int(g)) for g in self.buffers.G[3::4]}))
-        scene = SceneSpec(bsdfs, self.emitters, self.buffers.textures, leaves, kinds, shapes)
+                            self.build.model, derivative=self.derivative)
+        scene = self.scene_spec_for_params()
         # the report is derived from the scene, so a cache hit can print it too
         self.report = describe(scene) + self._folding(scene)
         self.kernel_src, self.scene_spec = src, scene
@@ -286,23 +291,62 @@ class Scene:
         _, self.search_paths = scene_plugins(self.desc, self.bsdfs, self.emitters,
                                              self.buffers.textures)
         if not self.specialize:  # generic: parameter values come from PRM at run time
-            scene, self.params = parameter_slots(scene, self.build.model)
+            scene, prm = parameter_slots(scene, self.build.model)
+            if not self._prm_set:
+                self.prm = prm
         filename = str(self.path.with_suffix(".rdsl"))
         mod = jit(src, build=self.build, scene=scene, search_paths=self.search_paths,
                   filename=filename)
         if not self.specialize:  # and so do the tables the plugins compute per scene
-            self.params = fill_tables(mod, self.scene_spec, self.params, src, filename,
-                                      self.search_paths)
+            self.prm = fill_tables(mod, self.scene_spec, self.prm, src, filename,
+                                   self.search_paths)
         self._module = mod
         self.compile_seconds = mod.compile_seconds
         self.from_cache = mod.from_cache
         return mod
 
+    def scene_spec_for_params(self) -> SceneSpec:
+        """What ``specialize`` is told about the scene: its instances and kinds."""
+        bsdfs, leaves = split_leaves(self.bsdfs)  # combinators reach leaves by id
+        kinds = tuple(sorted({int(k) for k in self.buffers.lights.EK[0::4]}))
+        shapes = tuple(sorted({_shape_kind(int(g)) for g in self.buffers.G[3::4]}))
+        return SceneSpec(bsdfs, self.emitters, self.buffers.textures, leaves, kinds, shapes,
+                         integrator_instances(self.desc.integrator))
+
+    @property
+    def params(self) -> SceneParams:
+        """The scene's parameters by name (runtime/render/differentiable.py)."""
+        if getattr(self, "_params", None) is None or self._params.scene is not self:
+            self._params = SceneParams(self)
+        return self._params
+
+    def use_generic(self) -> None:
+        """Read parameters at run time from now on (a parameter was assigned)."""
+        if not self._prm_set:
+            self.prm = np.array(self.params.values)
+            self._prm_set = True
+        if self.specialize:
+            self.specialize = False
+            self._module = None
+
+    def render_forward(self, name: str, spp: int | None = None, seed: int | None = None,
+                       tangent: Any = None, threads: int | None = None
+                       ) -> tuple[np.ndarray, np.ndarray]:
+        """The image and its derivative with respect to parameter ``name`` (forward-mode
+        AD along ``tangent``): runtime/render/differentiable.py."""
+        return render_forward(self, name, spp, seed, tangent, threads)
+
+    def gradient(self, names: list[str], loss_grad: np.ndarray, spp: int | None = None,
+                 seed: int | None = None) -> dict[str, np.ndarray]:
+        """d loss / d parameter for ``names``, from d loss / d image (forward mode, one
+        render per parameter component): runtime/render/differentiable.py."""
+        return gradient(self, names, loss_grad, spp, seed)
+
     def _folding(self, scene: SceneSpec) -> list[str]:
         """What the build folds (specialized) or reads at run time (generic), for the report."""
         _, values = parameter_slots(scene, self.build.model)
         n = sum(1 for i in [*scene.bsdfs, *scene.bsdf_leaves, *scene.textures,
-                            *scene.emitters] if i.params)
+                            *scene.emitters, *scene.integrators] if i.params)
         kinds = {v: k for k, v in EMITTER_KINDS.items()}
         have = [kinds[k] for k in scene.emitter_kinds or ()]
         lacks = ", ".join(k for k in EMITTER_KINDS if k not in have) or "no other kind"
@@ -322,8 +366,8 @@ class Scene:
     def _param_args(self, mod: Any) -> list[np.ndarray]:
         """``PRM`` for a generic kernel that reads parameters (none when specialized)."""
         kernel = next(k for k in mod.manifest["kernels"] if k["name"] == "render_sample")
-        return [self.params] if any(p["name"] == PARAM_BUFFER for p in kernel["params"]) \
-            else []
+        names = [p["name"] for p in kernel["params"]]
+        return [self.prm] * (PARAM_BUFFER in names) + [self.tangents] * (TANGENT_BUFFER in names)
 
     def instruction_counts(self) -> tuple[int, int]:
         """IR instructions of ``render_sample`` after the whole pipeline, specialized and
@@ -342,9 +386,11 @@ class Scene:
     @property
     def channel_names(self) -> list[str]:
         """The image's channels, as the EXR names them: R, G, B (Y in mono), then the AOVs of
-        an ``aov`` integrator (runtime/render/integrators.py)."""
+        the integrator (runtime/render/integrators.py), then, rendering a derivative, its
+        channels (``d.R``...)."""
         base = ["Y"] if self.build.model.mono else ["R", "G", "B"]
-        return base + integrator_plan(self.desc.integrator).aov_channel_names()
+        return base + integrator_plan(self.desc.integrator).aov_channel_names() + \
+            [f"d.{c}" for c in base if self.derivative]
 
     def render(self, spp: int | None = None, seed: int | None = None,
                threads: int | None = None, progress: bool = False,

@@ -53,7 +53,12 @@ class WatchJob:
 
 
 def _digest(path: Path) -> str | None:
+    """A file's content, or a plugin folder's list of ``.rdsl`` files (a plugin file added
+    or removed there may change which plugin a scene's name resolves to)."""
     try:
+        if path.is_dir():
+            names = "\n".join(sorted(p.name for p in path.glob("*.rdsl")))
+            return hashlib.sha256(names.encode()).hexdigest()
         return hashlib.sha256(path.read_bytes()).hexdigest()
     except OSError:
         return None
@@ -144,7 +149,9 @@ class Watcher:
     @staticmethod
     def _sources(scene: Scene) -> list[Path]:
         module = scene.compile()
-        return [*scene.reads.files, *module.source_files]
+        folders = [scene.path.parent.resolve(),
+                   *(Path(p).resolve() for p in scene.plugins if Path(p).is_dir())]
+        return [*scene.reads.files, *module.source_files, *folders]
 
     def run(self, poll: float = POLL_SECONDS, max_updates: int | None = None,
             stop: threading.Event | None = None,

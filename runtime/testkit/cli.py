@@ -1,5 +1,5 @@
 """``rdsl test-plugin FILE.rdsl``: find the plugin the file declares (a ``bsdf``, an
-``emitter`` or a ``texture``), compile it as the renderer calls it in the chosen variant,
+``emitter``, a ``texture`` or an ``integrator``), compile it as the renderer calls it in the chosen variant,
 run the checks of its kind, print one row per check and case and a summary line; the exit
 status is 1 when a check fails.
 
@@ -24,8 +24,8 @@ from .report import Row, summary, table
 
 def add_commands(sub: argparse._SubParsersAction) -> dict[str, Callable[[Any], int]]:
     """Add ``test-plugin`` to ``sub``; returns its handler by name."""
-    t = sub.add_parser("test-plugin", help="check a BSDF, emitter or texture plugin: "
-                       "chi-square of its sampling, energy, NaN/Inf sweeps")
+    t = sub.add_parser("test-plugin", help="check a BSDF, emitter, texture or integrator "
+                       "plugin: chi-square of its sampling, energy, NaN/Inf sweeps")
     t.add_argument("file", help="the plugin's .rdsl file")
     t.add_argument("--variant", default="rgb", help=", ".join(VARIANTS) + " (default: rgb)")
     t.add_argument("--target", default="host")
@@ -58,14 +58,15 @@ def choose(path: Path, wanted: str | None) -> Declaration:
         found = named
     if not found:
         raise CompileError("the file declares no plugin; expected `bsdf NAME {`, "
-                           "`emitter NAME {` or `texture NAME {`", _at(path))
+                           "`emitter NAME {`, `texture NAME {` or `integrator NAME {`", _at(path))
     if len(found) > 1:
         raise CompileError(f"the file declares several plugins ("
                            f"{', '.join(d.name for d in found)}); choose one with --plugin",
                            _at(path))
     decl = found[0]
-    if decl.kind not in KINDS:
-        raise CompileError(f"`rdsl test-plugin` tests {', '.join(KINDS)} plugins, not "
+    if decl.kind not in KINDS and decl.kind != "integrator":
+        raise CompileError(f"`rdsl test-plugin` tests {', '.join(KINDS)} and integrator "
+                           "plugins, not "
                            f"{decl.kind} `{decl.name}`", _at(path, decl.line, 1))
     if decl.kind == "texture" and "eval_1" not in decl.methods:
         # the interface asks for eval() alone, but the renderer's texture dispatch
@@ -141,13 +142,24 @@ def test_plugin_command(args: Any) -> int:
     if args.samples < 1000:
         raise CompileError(f"--samples {args.samples}: at least 1000 are needed")
     opts = Options(samples=args.samples, params=parse_params(args.params, decl))
+    if decl.kind == "integrator":
+        from .integrator_checks import check_integrator
+
+        print(f"integrator `{decl.name}` ({decl.where}), variant {build.model.name}, "
+              f"target {build.target.name}")
+        rows = check_integrator(decl, build.model.name, build.target, opts)
+        return _report(decl.name, build, rows)
     h = Harness(variant=build.model.name, target=build.target, decl=decl)
     t0 = time.perf_counter()
     h.module(opts.params)  # compile first: a mistake in the plugin is a diagnostic here
     print(f"{decl.kind} `{decl.name}` ({decl.where}), variant {build.model.name}, "
           f"target {build.target.name}: compiled in {time.perf_counter() - t0:.1f} s")
-    rows = run_checks(h, opts)
+    return _report(decl.name, build, run_checks(h, opts))
+
+
+def _report(name: str, build: Any, rows: list[Row]) -> int:
+    """Print the table and the summary; the exit status."""
     print(table(rows))
-    print(summary(f"{decl.name} ({build.model.name})", rows))
+    print(summary(f"{name} ({build.model.name})", rows))
     sys.stdout.flush()
     return 1 if any(r.failed for r in rows) else 0

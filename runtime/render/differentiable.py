@@ -1,0 +1,161 @@
+"""A scene's parameters by name, and forward-mode derivatives of its image.
+
+``scene.params`` maps names to numpy arrays, named as Mitsuba 3's ``mi.traverse`` names
+them: ``red.reflectance.value`` (a BSDF's ``reflectance``, the BSDF's id first),
+``light.emitter.radiance.value`` (the area emitter of the shape ``light``),
+``path.max_depth``.  The names without the trailing ``.value`` are accepted too.  Reading
+gives the value the scene has; assigning one switches the scene to the generic build
+(parameters read at run time from its buffer ``PRM``: docs/renderer.md), once, so the next
+render uses it without compiling again.
+
+``scene.render_forward(name, spp=, seed=, tangent=)`` returns the image and its derivative
+along ``tangent`` in the parameter's space (all ones by default: the derivative with
+respect to a grey change of a colour).  It renders with a build whose kernel also carries
+the tangents of every value (``ad_forward``, compiler/passes/ad_forward.py): the tangent
+buffer ``dPRM`` holds ``tangent`` in the parameter's slots and zeros elsewhere, and the film
+accumulates ``derivative(value)`` as extra channels.  The derivative is that of the same
+Monte Carlo estimate (same seed): it ignores the discontinuities of visibility, as
+Mitsuba 3 does without reparameterization.
+
+Colours are stored as RGB in the ``mono`` and ``rgb`` variants; the spectral variants store
+upsampling coefficients, whose derivatives are not offered yet (a clear error).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator, MutableMapping
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from ...compiler.build import Build
+from ...compiler.diagnostics import CompileError
+from ...compiler.passes.specialize import parameter_slots
+from ...core.scene_spec import SceneSpec, Slot
+
+if TYPE_CHECKING:
+    from .renderer import Scene
+
+__all__ = ["SceneParams", "gradient", "param_slots", "render_forward"]
+
+KINDS = ("bsdfs", "bsdf_leaves", "emitters", "textures", "integrators")
+
+
+def param_slots(spec: SceneSpec) -> dict[str, Slot]:
+    """Parameter name -> its slot of ``PRM``, for a generic build's scene (whose values are
+    :class:`Slot`s)."""
+    out: dict[str, Slot] = {}
+    for kind in KINDS:
+        for inst in getattr(spec, kind):
+            for key, value in inst.params.items():
+                if isinstance(value, Slot):
+                    out[f"{inst.name or inst.plugin}.{key}"] = value
+    return out
+
+
+def _lookup(slots: dict[str, Slot], name: str) -> tuple[str, Slot]:
+    key = name[:-len(".value")] if name.endswith(".value") and name not in slots else name
+    if key not in slots:
+        valid = ", ".join(f"{n}.value" if not n.startswith(("path.", "direct.")) else n
+                          for n in slots)
+        raise CompileError(f"the scene has no parameter `{name}` (its parameters: "
+                           f"{valid or 'none'})")
+    return key, slots[key]
+
+
+class SceneParams(MutableMapping):
+    """The scene's parameters by name (see the module's documentation)."""
+
+    def __init__(self, scene: Scene) -> None:
+        self.scene = scene
+        spec = scene.scene_spec_for_params()
+        generic, self.values = parameter_slots(spec, scene.build.model)
+        self.slots = param_slots(generic)
+        if scene.build.model.spectral:
+            self.slots = {k: s for k, s in self.slots.items() if s.size == 1}
+
+    def __getitem__(self, name: str) -> np.ndarray:
+        _, slot = _lookup(self.slots, name)
+        buf = self.scene.prm if self.scene._prm_set else self.values
+        return np.array(buf[slot.offset:slot.offset + slot.size])
+
+    def __setitem__(self, name: str, value: Any) -> None:
+        _, slot = _lookup(self.slots, name)
+        v = np.asarray(value, np.float32).reshape(-1)
+        if v.size not in (1, slot.size):
+            raise ValueError(f"`{name}` holds {slot.size} value(s); got an array of {v.size}")
+        self.scene.use_generic()
+        self.scene.prm[slot.offset:slot.offset + slot.size] = v
+
+    def __delitem__(self, name: str) -> None:
+        raise TypeError("scene parameters cannot be deleted")
+
+    def __iter__(self) -> Iterator[str]:
+        return iter(self.slots)
+
+    def __len__(self) -> int:
+        return len(self.slots)
+
+
+def _forward_scene(scene: Scene) -> Scene:
+    """The scene's forward-mode twin: same description and buffers, a generic build with
+    tangents, whose film also takes the derivative of the radiance."""
+    twin = getattr(scene, "_forward", None)
+    if twin is None or twin.desc is not scene.desc:
+        from .renderer import Scene as SceneClass
+
+        twin = SceneClass.__new__(SceneClass)
+        twin.__dict__.update(scene.__dict__)
+        twin.build = Build(scene.build.target, scene.build.model, "forward")
+        twin.specialize, twin.derivative, twin._prm_set = False, True, True
+        twin._module = None
+        twin._forward = None
+        scene._forward = twin
+    return twin
+
+
+def render_forward(scene: Scene, name: str, spp: int | None = None, seed: int | None = None,
+                   tangent: Any = None, threads: int | None = None
+                   ) -> tuple[np.ndarray, np.ndarray]:
+    """The image and its derivative with respect to parameter ``name`` along ``tangent``."""
+    if scene.build.model.spectral:
+        raise CompileError("forward derivatives in the spectral variants are not supported "
+                           "yet (colours are stored as upsampling coefficients); render in "
+                           "`rgb` or `mono`")
+    params = scene.params  # validates the name before anything compiles
+    key, slot = _lookup(params.slots, name)
+    t = np.ones(slot.size, np.float32) if tangent is None else \
+        np.asarray(tangent, np.float32).reshape(-1)
+    if t.size not in (1, slot.size):
+        raise ValueError(f"the tangent of `{name}` has {slot.size} value(s); got {t.size}")
+    twin = _forward_scene(scene)
+    twin.compile()
+    twin.prm = np.array(scene.prm if scene._prm_set else params.values)
+    twin.tangents = np.zeros_like(twin.prm)
+    twin.tangents[slot.offset:slot.offset + slot.size] = t
+    img = twin.render(spp=spp, seed=seed, threads=threads)
+    c = 1 if scene.build.model.mono else 3  # the derivative's channels come last
+    return img[..., :-c], img[..., -c:]
+
+
+def gradient(scene: Scene, names: list[str], loss_grad: np.ndarray, spp: int | None = None,
+             seed: int | None = None) -> dict[str, np.ndarray]:
+    """The gradient of a loss with respect to parameters ``names``, given the loss's
+    gradient with respect to the image (``loss_grad``, shaped like ``render()``'s colour
+    channels): by forward mode, one derivative render per parameter component, each
+    contracted with ``loss_grad``.  Exact for few parameters (colours, a roughness); reverse
+    mode, which costs one render for all of them, is not written yet."""
+    out: dict[str, np.ndarray] = {}
+    for name in names:
+        _, slot = _lookup(scene.params.slots, name)
+        g = np.zeros(slot.size, np.float64)
+        for k in range(slot.size):
+            tangent = np.zeros(slot.size, np.float32)
+            tangent[k] = 1.0
+            _, d_img = render_forward(scene, name, spp, seed, tangent)
+            if d_img.shape != np.shape(loss_grad):
+                raise ValueError(f"the loss gradient has shape {np.shape(loss_grad)}; the "
+                                 f"image's colour channels are {d_img.shape}")
+            g[k] = float(np.sum(d_img.astype(np.float64) * loss_grad))
+        out[name] = g.astype(np.float32)
+    return out
