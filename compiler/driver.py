@@ -18,6 +18,7 @@ from .diagnostics import CompileError
 from .ir import Module
 from .passes import Pass
 from .passes.ad_forward import AdForward
+from .passes.evaluate import Evaluate, evaluable
 from .passes.inline import Inline
 from .passes.lift import Lift
 from .passes.optimize import Optimize
@@ -36,8 +37,12 @@ def pipeline(build: Build, scene: SceneSpec | None = None,
     """The passes from lowered IR to vectorized scalar IR for ``build``, in order."""
     return [
         *([Specialize(scene, report)] if scene is not None else []),  # the scene's instances
-        Inline(build.ad is not None),  # calls become bodies; recursion is a diagnostic
-        Optimize(),  # fold and prune early, so later passes see less
+        Inline(build.ad is not None, keep=evaluable),  # calls become bodies, but pure calls
+        # running loops
+        Optimize(),  # fold and prune early: what the scene fixes becomes constants
+        Evaluate(report=report),  # pure calls with constant arguments: run once, now
+        Inline(build.ad is not None),  # the calls left become bodies; recursion is a diagnostic
+        Optimize(),  # fold the evaluated constants through
         Lift(build.model),  # Spectrum becomes mono/rgb; `if const` traits become constants
         Optimize(),  # fold the trait branches away
         Scalarize(),  # aggregates become scalars; kernel ABI recorded

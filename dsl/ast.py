@@ -303,6 +303,16 @@ class FnDecl:
     ret: TypeExpr | None
     body: Block
     loc: Loc
+    table: TableSpec | None = None  # a plugin's `table(...) fn`
+
+
+@dataclass
+class TableSpec:
+    """The options of a ``table(n = 64, lo = 0.0, hi = 1.0, error = 1e-4) fn``: each given
+    option by name, with its number and location (checked by the checker)."""
+
+    options: dict[str, tuple[float | int, Loc]]
+    loc: Loc
 
 
 @dataclass

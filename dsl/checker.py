@@ -42,6 +42,7 @@ from .declarations import Declarations
 from .imports import STDLIB, load_program
 from .interfaces import PLUGIN_INTERFACES, check_integrator
 from .parser import parse
+from .tables import table_options as _table_options
 from .program import CheckedProgram, FnInfo, ModuleInfo, PluginInfo, Symbol
 from .types import (
     BUILTIN_TYPES,
@@ -163,6 +164,9 @@ class _Checker(Declarations):
             fn = self._fn_info(fd, mod, pl)
             fn.ir_name = f"{pd.name}.{fd.name}"
             pl.fns[fd.name] = fn
+            if fd.table is not None:
+                pl.tables[fd.name] = _table_options(
+                    fn, pd, {m for m, _, _ in PLUGIN_INTERFACES[pd.kind]})
         for mname, params, ret in PLUGIN_INTERFACES[pd.kind]:
             sig = f"fn {mname}(" + ", ".join(f"{n}: {t}" for n, t in params) + f") -> {ret}"
             fn = pl.fns.get(mname)
@@ -579,3 +583,4 @@ def _always_returns(stmts: list[A.Stmt]) -> bool:
             if _always_returns(s.then.stmts) and _always_returns(other):
                 return True
     return False
+

@@ -65,8 +65,28 @@ def lower_program(cp: CheckedProgram) -> ir.Module:
         mod.add(_FnLowerer(fn).run())
     for pl in cp.plugins:
         for fn in pl.fns.values():
-            mod.add(_FnLowerer(fn, pl).run())
+            lowered = mod.add(_FnLowerer(fn, pl).run())
+            if fn.name in pl.tables:
+                mod.add(_table_read(lowered, pl.tables[fn.name]))
     return mod
+
+
+TABLE_SLOT = "{}.table"  # the hidden plugin parameter holding a table's offset
+
+
+def _table_read(fn: Function, options: dict[str, Any]) -> Function:
+    """``NAME.read``, what calls to the table function ``NAME`` call: the same parameters
+    (and the hidden table offsets), its body the exact function until ``specialize``
+    replaces it by the lookup of the scene's table (see compiler/passes/specialize.py)."""
+    params = [Param(Value(p.value.type, p.value.name), p.uniform, p.default) for p in fn.params]
+    body = ir.Block()
+    b = Builder(body, fn.loc)
+    call = b.emit(Op.CALL, [p.value for p in params], list(fn.ret_types), {"callee": fn.name})
+    b.return_(*call.results)
+    method = fn.attrs["method"]
+    attrs = {**{k: v for k, v in fn.attrs.items() if k != "export"},
+             "table": {"fn": fn.name, "slot": TABLE_SLOT.format(method), **options}}
+    return Function(fn.name + ".read", params, list(fn.ret_types), body, fn.loc, attrs)
 
 
 # --------------------------------------------------------------------------------------
@@ -212,6 +232,10 @@ class _FnLowerer:
                 self.env[s] = v
                 self.plugin_values.append(v)
                 params.append(Param(v, uniform=True, default=d))
+            for name in self.plugin.tables:  # where the scene's tables are: see _table_read
+                v = Value(ir.I32, TABLE_SLOT.format(name))
+                self.plugin_values.append(v)
+                params.append(Param(v, uniform=True, default=-1))
             attrs = {"plugin": self.plugin.name, "kind": self.plugin.kind, "method": fn.name}
         else:
             attrs = {"source_name": fn.name}
@@ -509,10 +533,16 @@ class _FnLowerer:
             attrs: dict[str, Any] = {"callee": target.ir_name}
             if target.plugin is not None and target.plugin is self.plugin:
                 args += self.plugin_values
+                # a table read, except in a table's own definition (tables are filled
+                # independently of each other)
+                if target.name in target.plugin.tables and self.fn.decl.table is None:
+                    attrs["callee"] += ".read"
             elif target.plugin is not None:  # from outside: `specialize` binds the params
                 attrs["bound"] = len(args)
                 args += [self.plugin_default(loc, s.type, d)
                          for s, d in zip(target.plugin.params, target.plugin.defaults)]
+                # and the tables' offsets (a table function called from outside computes)
+                args += [self.const(loc, -1, I32) for _ in target.plugin.tables]
             ins = self.b.emit(Op.CALL, args, [t] if t is not None else [], attrs, loc=loc)
             return ins.results[0] if ins.results else None
         kind, what = target

@@ -261,6 +261,26 @@ class _ToAst(Transformer):
         return A.PluginDecl(str(kind), str(name), params, fns, self._tloc(name),
                             self._tloc(kind))
 
+    def table_decl(self, meta, ch):
+        *opts, fn = ch
+        options: dict[str, tuple[float | int, Loc]] = {}
+        for name, value, loc in (o for o in opts if o is not None):
+            if name in options:
+                raise CompileError(Diagnostic(loc, f"duplicate table option `{name}`"))
+            options[name] = (value, loc)
+        fn.table = A.TableSpec(options, self._loc(meta))
+        return fn
+
+    def table_opt(self, meta, ch):
+        return str(ch[0]), ch[1], self._tloc(ch[0])
+
+    def table_value(self, meta, ch):
+        tok = ch[0]
+        return float(tok) if tok.type == "FLOAT" else int(str(tok).rstrip("ul"), 0)
+
+    def table_neg(self, meta, ch):
+        return -self.table_value(meta, ch)
+
     def plugin_param(self, meta, ch):
         return A.PluginParam(str(ch[0]), ch[1], ch[2], self._tloc(ch[0]))
 

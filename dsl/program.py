@@ -66,6 +66,8 @@ class PluginInfo:
     params: list[Symbol] = field(default_factory=list)
     defaults: list[Any] = field(default_factory=list)
     fns: dict[str, FnInfo] = field(default_factory=dict)
+    # the `table` functions: name -> {"n", "lo", "hi", "error"} (empty for a per-scene value)
+    tables: dict[str, dict[str, Any]] = field(default_factory=dict)
 
 
 @dataclass

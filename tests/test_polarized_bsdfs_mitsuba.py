@@ -220,9 +220,9 @@ def test_rough_sample_weight_matches_mitsuba(mi, plugin, mi_params, params, tol)
 
 
 def test_roughplastic_depolarizes_as_mitsuba(mi):
-    """roughplastic is a depolarizer in both (its intensity differs by the documented
-    quadrature error of our internal-reflectance integrals, so only the structure is
-    compared here)."""
+    """roughplastic is a depolarizer in both (only the structure is compared here: this
+    plugin kernel, compiled without a scene, computes its tables' integrals exactly at each
+    call instead of interpolating Mitsuba's table; tests/test_tables.py compares values)."""
     bsdf = mi.load_dict({"type": "roughplastic", "distribution": "ggx", "alpha": 0.3})
     wi = np.repeat(EVAL_DIRS, len(EVAL_DIRS), axis=0)
     wo = np.tile(EVAL_DIRS, (len(EVAL_DIRS), 1))

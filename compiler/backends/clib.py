@@ -86,7 +86,9 @@ def manifest(module: ir.Module, target: Target) -> dict[str, Any]:
         })
     return {"rdsl_version": __version__, "abi": ABI_VERSION, "strides": "bytes",
             "target": target.name, "width": target.width, "backend": target.backend,
-            "variant": module.attrs.get("variant"), "kernels": out}
+            "variant": module.attrs.get("variant"), "kernels": out,
+            # the generic build's tables, filled at scene load (see compiler/precompute.py)
+            "tables": module.attrs.get("tables", [])}
 
 
 def header(module: ir.Module, target: Target, stem: str) -> str:

@@ -144,8 +144,10 @@ def target_machine(target: Target | str):
                                      codemodel="default")
 
 
-def optimized_module(module: ir.Module, target: Target | str):
-    """Lower, verify and optimize with LLVM's O3 pipeline; return the binding ModuleRef."""
+def optimized_module(module: ir.Module, target: Target | str, speed: int = 3):
+    """Lower, verify and optimize with LLVM's O``speed`` pipeline (O3 for kernels; the
+    run-once table kernels of compiler/precompute.py take less); return the binding
+    ModuleRef and the target machine."""
     t = get_target(target)
     llvm = _binding()
     text = str(lower_module(module, t))
@@ -158,7 +160,7 @@ def optimized_module(module: ir.Module, target: Target | str):
     tm = target_machine(t)
     mod.triple = t.triple
     mod.data_layout = str(tm.target_data)
-    pto = llvm.PipelineTuningOptions(speed_level=3)
+    pto = llvm.PipelineTuningOptions(speed_level=speed)
     # our vectorization is explicit: keep LLVM from re-vectorizing the lane loops (and keep
     # the scalar target scalar, so that speedups measure our vectorizer)
     pto.loop_vectorization = False

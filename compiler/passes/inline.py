@@ -7,9 +7,15 @@ frontend turns early returns into flags).
 Guarantees: exported functions contain no ``call``; only exported functions remain (the
 library functions they used have been copied into them).  Recursion, direct or mutual, is a
 diagnostic at the call site that closes the cycle.
+
+``Inline(keep=evaluable)`` (the first of the pipeline's two) leaves the calls to the functions
+``keep(module)`` names, and those of them still called, for ``evaluate`` to fold; their own
+bodies are inlined all the same.
 """
 
 from __future__ import annotations
+
+from collections.abc import Callable
 
 from ..diagnostics import CompileError, Diagnostic
 from ..ir import Block, Function, Instr, Module, Op, Value, clone_block, replace_uses
@@ -20,18 +26,23 @@ from . import Pass, register
 class Inline(Pass):
     name = "inline"
 
-    def __init__(self, mark_partials: bool = False) -> None:
+    def __init__(self, mark_partials: bool = False,
+                 keep: Callable[[Module], set[str]] | None = None) -> None:
         # for automatic differentiation: each call of a math function with declared partial
         # derivatives (ad_forward.PARTIALS) leaves an `ad.rule` giving them
         self.mark_partials = mark_partials
+        self.keep_fn = keep
 
     def run(self, module: Module) -> None:
         self.module = module
+        self.keep = self.keep_fn(module) if self.keep_fn is not None else set()
         self.done: set[str] = set()
         self.stack: list[tuple[str, Instr | None]] = []
         for fn in list(module.functions.values()):
             self._inline_function(fn, None)
-        for name in [n for n, f in module.functions.items() if not f.attrs.get("export")]:
+        called = _still_called(module)
+        for name in [n for n, f in module.functions.items()
+                     if not f.attrs.get("export") and n not in called]:
             del module.functions[name]
 
     def _inline_function(self, fn: Function, site: Instr | None) -> None:
@@ -71,6 +82,9 @@ class Inline(Pass):
                 raise CompileError([Diagnostic(ins.loc,
                                                f"unknown function `{ins.attrs['callee']}`")])
             self._inline_function(callee, ins)
+            if callee.name in self.keep:
+                out.append(ins)
+                continue
             args = [mapping.get(v, v) for v in ins.operands]
             local = {p.value: a for p, a in zip(callee.params, args)}
             body = clone_block(callee.body, local)
@@ -104,3 +118,16 @@ class Inline(Pass):
         rule = Instr(Op.AD_RULE, [*args, y, *partials], [y.type], {}, loc=call.loc)
         out.append(rule)
         mapping[call.results[0]] = rule.result
+
+
+def _still_called(module: Module) -> set[str]:
+    """The functions the calls left (to kept functions) reach, from the exported ones."""
+    out: set[str] = set()
+    todo = [f for f in module.functions.values() if f.attrs.get("export")]
+    while todo:
+        for ins in todo.pop().walk():
+            name = ins.attrs["callee"] if ins.op is Op.CALL else None
+            if name is not None and name not in out and name in module.functions:
+                out.add(name)
+                todo.append(module.functions[name])
+    return out

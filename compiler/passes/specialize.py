@@ -26,6 +26,16 @@ texture at the same ``si`` first is the same thing.  A ``Float`` parameter set b
 lookup (its plugins' ``eval_1``, Mitsuba's).  A method in ``OPTIONAL`` (``disperses``) may
 be missing from a plugin: its instances then give the constant listed there.
 
+A plugin's ``table`` functions (docs/language.md, "Tables") are computed parameters: each
+method gets, per table, a hidden ``NAME.table`` parameter, which the dispatch sets to where
+the instance's samples are, and the table's read function ``PLUGIN.NAME.read`` becomes the
+interpolation (:func:`rdsl.compiler.precompute.build_read`).  Where the instance's
+parameters are constants the samples are computed now (:func:`~rdsl.compiler.precompute.
+tabulate`) and folded, all the scene's tables in one ``table`` constant; where a parameter
+the table takes is read from ``PRM`` they are laid out after the parameters in ``PRM`` and
+listed in ``module.attrs["tables"]`` (the manifest's ``tables``) for the runtime to fill at
+scene load (runtime/tables.py).
+
 The generic build (``Specialize(scene, fold=False, model=...)``, ``rdsl render
 --no-specialize``) keeps the same dispatch over plugin types but reads every parameter the
 scene sets from a float buffer ``PRM`` at run time (a :class:`Slot` per value, laid out by
@@ -170,15 +180,17 @@ class Specialize(Pass):
         self.scene = scene or SceneSpec()
         if not fold:  # the parameter buffer holds colours as `model` stores them
             self.scene, _ = parameter_slots(self.scene, model)
+        self._prm_len = _slots_end(self.scene)  # where the generic build's tables go in PRM
         self.report = report if report is not None else []
         self._prm: dict[str, Value] = {}  # placeholder -> its PRM argument, once it reads one
+        self._tables = _Tables()
 
     def run(self, module: Module) -> None:
         for name, (kind, method) in PLACEHOLDERS.items():
             placeholder = module.functions.get(name)
             if placeholder is None:
                 continue
-            self._dispatch(module, placeholder, getattr(self.scene, kind), method)
+            self._dispatch(module, placeholder, kind, method)
         for name, present in ((EMITTER_KIND_PLACEHOLDER, self.scene.emitter_kinds),
                               (SHAPE_KIND_PLACEHOLDER, self.scene.shape_kinds)):
             kinds = module.functions.get(name)
@@ -186,9 +198,11 @@ class Specialize(Pass):
                 kinds.body = _kind_test(kinds, present)
         for fn in list(module.functions.values()):
             self._bind_calls(module, fn, fn.body)
+        self._read_tables(module)
         if self._prm:
             for name, prm in self._prm.items():
-                module.functions[name].params.append(Param(prm, uniform=True))
+                if module.functions[name].params[-1].value is not prm:
+                    module.functions[name].params.append(Param(prm, uniform=True))
             _thread_buffer(module, PARAM_BUFFER)
         self.report.extend(describe(self.scene, [n for n in PLACEHOLDERS
                                                  if n in module.functions]))
@@ -210,7 +224,10 @@ class Specialize(Pass):
                 pre = Builder(Block(), ins.loc)
                 ident = pre.const(0, I32)
                 defaults = {p.value.name: p.default for p in callee.params}
+                k = next((j for j, i in enumerate(self.scene.integrators) if i is inst), None)
                 ins.operands[n:] = [
+                    self._table_offset(pre, module, p, ident, "integrators", [k], callee)
+                    if k is not None and _is_table_slot(module, plugin, p) else
                     self._param_value(pre, p, ident, [inst], [0], defaults.get(p.value.name),
                                       module, fn, {})
                     for p in callee.params[n:]]
@@ -218,10 +235,11 @@ class Specialize(Pass):
             out.append(ins)
         block.instrs = out
 
-    def _dispatch(self, module: Module, placeholder: Function, instances: list[Instance],
-                  method: str) -> None:
-        """Dispatch over the plugin *types* of ``instances``; the parameters of one type's
-        instances are selected by id, so three diffuse materials cost one diffuse call."""
+    def _dispatch(self, module: Module, placeholder: Function, kind: str, method: str) -> None:
+        """Dispatch over the plugin *types* of the scene's ``kind`` instances; the parameters
+        of one type's instances are selected by id, so three diffuse materials cost one
+        diffuse call."""
+        instances: list[Instance] = getattr(self.scene, kind)
         if not instances:
             return  # the placeholder's own body stays
         ident, args = placeholder.params[0].value, [p.value for p in placeholder.params[1:]]
@@ -252,6 +270,8 @@ class Specialize(Pass):
                         if method in OPTIONAL else None)
                 params = [_constant(tb, p.value.type, False, placeholder.name)
                           if used is not None and p.value not in used else
+                          self._table_offset(tb, module, p, ident, kind, ids, own)
+                          if _is_table_slot(module, plugin, p) else
                           self._param_value(tb, p, ident, [instances[k] for k in ids], ids,
                                             defaults.get(p.value.name), module, placeholder,
                                             textures)
@@ -276,6 +296,65 @@ class Specialize(Pass):
         last = body.instrs.pop()
         body.instrs.append(Instr(Op.RETURN, last.operands, [], loc=last.loc))
         placeholder.body = body
+
+    def _table_offset(self, b: Builder, module: Module, p: Param, ident: Value, kind: str,
+                      ids: list[int], own: Function | None) -> Value:
+        """A table's hidden parameter: where the instance's samples are (selected by id)."""
+        assert own is not None
+        read = module.functions[f"{own.attrs['plugin']}.{p.value.name[:-len('.table')]}.read"]
+        instances = getattr(self.scene, kind)
+        out: Value | None = None
+        for k in reversed(ids):
+            at = b.const(self._table(module, read, kind, k, instances[k]), I32)
+            out = at if out is None else b.op(
+                Op.SELECT, I32, b.op(Op.EQ, BOOL, ident, b.const(k, I32)), at, out)
+        assert out is not None
+        return out
+
+    def _table(self, module: Module, read: Function, kind: str, k: int, inst: Instance) -> int:
+        """The offset of instance ``k``'s samples of the table ``read`` reads: computed now
+        (its parameters are constants) or laid out at the end of ``PRM`` for the runtime to
+        fill at load (the generic build: a parameter it takes is read from ``PRM``)."""
+        from ..precompute import table_params, table_size, tabulate
+
+        opts = read.attrs["table"]
+        key = (kind, k, opts["fn"])
+        if key not in self._tables.offsets:
+            size = table_size(opts)
+            names = {p.value.name for p in read.params}
+            if not any(isinstance(v, Slot) for n, v in inst.params.items() if n in names):
+                values = tabulate(module, opts, table_params(read, inst))
+                self._tables.offsets[key] = len(self._tables.values)
+                self._tables.values.extend(float(v) for v in values)
+            else:
+                self._tables.offsets[key] = self._prm_len + self._tables.prm
+                module.attrs.setdefault("tables", []).append(
+                    {**opts, "kind": kind, "index": k, "offset": self._tables.offsets[key]})
+                self._tables.prm += size
+        return self._tables.offsets[key]
+
+    def _read_tables(self, module: Module) -> None:
+        """The read functions of the tables laid out become lookups (see precompute)."""
+        from ..precompute import build_read
+
+        if not self._tables.offsets:
+            return
+        self.report.append(f"tables: {len(self._tables.offsets)} ({len(self._tables.values)} "
+                           f"values computed now, {self._tables.prm} filled at load in "
+                           f"{PARAM_BUFFER})")
+        for fn in list(module.functions.values()):
+            if "table" not in fn.attrs:
+                continue
+            if not self._tables.prm:
+                build_read(fn, None, self._tables.values)
+                continue
+            if self._tables.values:
+                raise CompileError(f"{fn.name}: a build cannot both fold tables and read "
+                                   f"them from {PARAM_BUFFER}")
+            prm = Value(BufferType(F32), PARAM_BUFFER)
+            fn.params.append(Param(prm, uniform=True))
+            build_read(fn, prm, None)
+            self._prm[fn.name] = prm
 
     def _param_value(self, b: Builder, p: Param, ident: Value, group: list[Instance],
                      ids: list[int], default: Any, module: Module, placeholder: Function,
@@ -343,6 +422,30 @@ class Specialize(Pass):
                                    f"{p.value.type}`, which `{placeholder.name}` does not have")
             operands.append(v)
         return b.emit(Op.CALL, operands, list(tex.ret_types), {"callee": tex.name}).result
+
+
+class _Tables:
+    """The tables laid out so far: (kind, instance, table function) -> offset; the folded
+    values, or the size claimed at the end of ``PRM``."""
+
+    def __init__(self) -> None:
+        self.offsets: dict[tuple[str, int, str], int] = {}
+        self.values: list[float] = []  # folded
+        self.prm = 0  # size laid out at the end of PRM
+
+
+def _slots_end(scene: SceneSpec) -> int:
+    """The size of the generic build's ``PRM`` without tables: the end of its last slot."""
+    ends = [v.offset + v.size
+            for kind in ("bsdfs", "emitters", "textures", "bsdf_leaves", "integrators")
+            for inst in getattr(scene, kind) for v in inst.params.values()
+            if isinstance(v, Slot)]
+    return max(ends, default=0)
+
+
+def _is_table_slot(module: Module, plugin: str, p: Param) -> bool:
+    name = p.value.name or ""
+    return name.endswith(".table") and f"{plugin}.{name[:-len('.table')]}.read" in module.functions
 
 
 def _constant(b: Builder, t: Type, value: Any, what: str) -> Value:

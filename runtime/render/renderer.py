@@ -28,6 +28,7 @@ from ...compiler.passes.specialize import PARAM_BUFFER, describe, parameter_slot
 from ...compiler.targets import Target
 from ...core.color import RGB, ColorModel
 from ...core.scene_spec import Instance, SceneSpec
+from ..tables import fill_tables
 from ..scene import load_scene_description
 from ..scene.reads import recording
 from .bsdfs import (
@@ -294,8 +295,12 @@ class Scene:
             scene, prm = parameter_slots(scene, self.build.model)
             if not self._prm_set:
                 self.prm = prm
+        filename = str(self.path.with_suffix(".rdsl"))
         mod = jit(src, build=self.build, scene=scene, search_paths=self.search_paths,
-                  filename=str(self.path.with_suffix(".rdsl")))
+                  filename=filename)
+        if not self.specialize:  # and so do the tables the plugins compute per scene
+            self.prm = fill_tables(mod, self.scene_spec, self.prm, src, filename,
+                                   self.search_paths)
         self._module = mod
         self.compile_seconds = mod.compile_seconds
         self.from_cache = mod.from_cache

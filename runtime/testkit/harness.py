@@ -38,6 +38,7 @@ import numpy as np
 from ...compiler.diagnostics import CompileError
 from ...compiler.ir import Loc
 from ...compiler.passes.specialize import parameter_slots
+from ..tables import fill_tables
 from ...core.color import MODELS
 from ...core.scene_spec import Instance, SceneSpec, SpectrumValue
 from ..plugins import ParamDecl, declared_params
@@ -211,11 +212,13 @@ class Harness:
         kind = {"bsdf": "bsdfs", "emitter": "emitters", "texture": "textures"}[self.decl.kind]
         spec, prm = parameter_slots(SceneSpec(**{kind: inst}), self.model)
         key = repr(spec)
+        text, filename = _harness_source(self.decl)
         if key not in self._mods:
-            text, filename = _harness_source(self.decl)
             self._mods[key] = jit(text, target=self.target, variant=self.variant, scene=spec,
                                   filename=filename)
-        return self._mods[key], np.asarray(prm if len(prm) else np.zeros(1), f32)
+        mod = self._mods[key]
+        prm = fill_tables(mod, SceneSpec(**{kind: inst}), prm, text, filename)
+        return mod, np.asarray(prm if len(prm) else np.zeros(1), f32)
 
     def _call(self, kernel: str, n: int, args: list, ul: Any, params: dict) -> Any:
         mod, prm = self.module(params)
