@@ -303,6 +303,12 @@ def _insert(rt: Type, ts: Sequence[Type], args: Sequence[Any], attrs: dict[str, 
     return agg[:i] + (args[1],) + agg[i + 1:]
 
 
+def _zero(rt: Type) -> Any:
+    """Zero of a float type (a scalar, or the tuple of a vector's components)."""
+    n = len(components(rt)) if not isinstance(rt, ScalarType) else 0
+    return np.float32(0.0) if n == 0 else tuple(np.float32(0.0) for _ in range(n))
+
+
 _PURE: dict[Op, _PureRule] = {
     Op.CONST: _const,
     **{op: _elementwise_op(op) for op in ELEMENTWISE_OPS},
@@ -316,6 +322,10 @@ _PURE: dict[Op, _PureRule] = {
     Op.BROADCAST: lambda rt, ts, args, attrs: _broadcast(args[0], rt),
     Op.LANE: lambda rt, ts, args, attrs: np.int32(0),
     Op.ANY: lambda rt, ts, args, attrs: bool(args[0]),
+    # automatic differentiation, as a build without AD computes it (ad_forward's contract)
+    Op.DETACH: lambda rt, ts, args, attrs: args[0],
+    Op.AD_RULE: lambda rt, ts, args, attrs: args[(len(args) - 1) // 2],
+    Op.DERIV: lambda rt, ts, args, attrs: _zero(rt),
 }
 
 

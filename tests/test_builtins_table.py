@@ -19,6 +19,8 @@ from rdsl.dsl.builtins import BUILTIN_FNS
 # y: Float, i: Int) -> <type>` (the type first, then the body)
 SAMPLES: dict[str, tuple[str, str, str]] = {
     "sqrt": ("rgb", "Float", "return sqrt(x);"),
+    "derivative": ("rgb", "Float", "return derivative(x * y) + x;"),
+    "detach": ("rgb", "Float", "return detach(x) * y;"),
     "floor": ("rgb", "Vec2", "return floor(Vec2(x, y));"),
     "ceil": ("rgb", "Float", "return ceil(y);"),
     "abs": ("rgb", "Float", "return abs(x) + Float(abs(i));"),

@@ -208,5 +208,5 @@ def test_spectral_envmap_generic_build_equals_specialized(tmp_path):
     path.write_text(scene_xml(env + point))
     a = load_scene(path, variant="spectral")
     b = load_scene(path, variant="spectral", specialize=False)
-    assert b.params.size > 0
+    assert b.prm.size > 0
     np.testing.assert_allclose(a.render(spp=4, seed=3), b.render(spp=4, seed=3), atol=1e-5)
