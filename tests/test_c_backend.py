@@ -110,7 +110,9 @@ def test_stdlib_bsdf_matches_avx2(path: Path, tmp_path: Path):
     if re.search(r"^bsdf \w+", path.read_text(), re.MULTILINE):  # a plugin, not a library
         assert {"eval", "pdf", "sample"} <= names, names
     rng = np.random.default_rng(3)
-    n = 999  # not a multiple of 8: the tail is masked
+    # not a multiple of 8: the tail is masked; fewer where a kernel computes roughplastic's
+    # coating integrals at every call (a plugin compiled without a scene has no tables)
+    n = 99 if path.stem in ("roughplastic", "common") else 999
     nonzero = 0
     for k in ref.manifest["kernels"]:
         inputs = _random_inputs(k, n, rng)
