@@ -262,3 +262,12 @@ def test_depth_integrator_matches_mitsuba(tmp_path):
     # (64 spp each: about 0.03 where a pixel straddles the wall's edge)
     np.testing.assert_allclose(ours, theirs, rtol=0.01, atol=0.06)
     assert abs(ours.mean() - theirs.mean()) < 0.005 * theirs.mean()
+
+
+def test_test_plugin_passes_the_stdlib_path_integrator(capsys):
+    """The stdlib's `path` given as a file is a plugin like a user's (its params declared in
+    rdsl, not Mitsuba's schema)."""
+    from rdsl.cli import main
+
+    assert main(["test-plugin", str(ROOT / "stdlib" / "integrator" / "path.rdsl")]) == 0
+    assert "0 failed" in capsys.readouterr().out

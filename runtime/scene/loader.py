@@ -468,6 +468,8 @@ class _Builder:
     def finish_integrator(self, obj: Plugin, node: ObjectNode, objects: dict) -> None:
         p = obj.params
         obj.children = [i for i, _ in objects.get("integrator", [])]
+        if obj.decl is not None:  # a user's plugin (or one given as a file): its own params
+            return
         if obj.type == "path":
             if p["max_depth"] < -1:
                 raise scene_error("path: 'max_depth' must be -1 (infinite) or >= 0",
