@@ -159,3 +159,19 @@ def test_albedo_example_recovers_the_walls():
         got, truth = r[wall], r[f"truth.{wall}"]
         assert np.linalg.norm(got - truth) / np.linalg.norm(truth) < 0.04, (wall, got, truth)
         assert abs(got[channel] - truth[channel]) / truth[channel] < 0.03, (wall, got, truth)
+
+
+def test_a_parameter_read_by_a_table_cannot_change_at_run_time(tmp_path):
+    """roughplastic's alpha feeds its precomputed coating table: assigning it is a clear
+    error (not a silently stale table); its colours change freely."""
+    text = CBOX.read_text().replace(
+        '<bsdf type="diffuse" id="red">',
+        '<bsdf type="roughplastic" id="red"><float name="alpha" value="0.2"/>').replace(
+        '<rgb name="reflectance" value="0.570068', '<rgb name="diffuse_reflectance" '
+        'value="0.570068')
+    (tmp_path / "cbox.xml").write_text(text)
+    scene = rdsl.load_scene(tmp_path / "cbox.xml", res=8, spp=1)
+    scene.params["red.diffuse_reflectance"] = [0.5, 0.1, 0.1]
+    assert np.isfinite(scene.render()).all()
+    with pytest.raises(CompileError, match="read by the precomputed table"):
+        scene.params["red.alpha"] = 0.3

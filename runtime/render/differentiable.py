@@ -30,6 +30,7 @@ import numpy as np
 
 from ...compiler.build import Build
 from ...compiler.diagnostics import CompileError
+from ...compiler.ir import ScalarType
 from ...compiler.passes.specialize import parameter_slots
 from ...core.scene_spec import SceneSpec, Slot
 
@@ -85,6 +86,7 @@ class SceneParams(MutableMapping):
         if v.size not in (1, slot.size):
             raise ValueError(f"`{name}` holds {slot.size} value(s); got an array of {v.size}")
         self.scene.use_generic()
+        _check_tables(self.scene, name)
         self.scene.prm[slot.offset:slot.offset + slot.size] = v
 
     def __delitem__(self, name: str) -> None:
@@ -95,6 +97,30 @@ class SceneParams(MutableMapping):
 
     def __len__(self) -> int:
         return len(self.slots)
+
+
+def _check_tables(scene: Scene, name: str) -> None:
+    """A parameter that a plugin's precomputed table reads (roughplastic's ``alpha``) cannot
+    change at run time yet: the table holds the loaded value's samples."""
+    from ..tables import _lowered
+
+    key, _ = _lookup(scene.params.slots, name)
+    owner, param = key.rsplit(".", 1)
+    mod = scene.compile()
+    entries = (mod.manifest or {}).get("tables") or []
+    if not entries:
+        return
+    module = _lowered(scene.kernel_src, str(scene.path.with_suffix(".rdsl")),
+                      tuple(str(p) for p in scene.search_paths))
+    for e in entries:
+        inst = getattr(scene.scene_spec, e["kind"])[e["index"]]
+        read = module.functions[e["fn"] + ".read"]
+        scalars = {p.value.name for p in read.params if isinstance(p.value.type, ScalarType)}
+        if (inst.name or inst.plugin) == owner and param in scalars:  # tables read numbers
+            raise CompileError(f"`{name}` is read by the precomputed table `{e['fn']}` of "
+                               f"`{owner}`, computed when the scene loaded; changing it at "
+                               "run time is not supported yet: load the scene with the new "
+                               "value (a -D default or the XML)")
 
 
 def _forward_scene(scene: Scene) -> Scene:
