@@ -83,6 +83,7 @@ def test_direct_sample_counts_keep_the_expectation(tmp_path):
     means = []
     for attrs in ("", ('<integer name="emitter_samples" value="3"/>'
                        '<integer name="bsdf_samples" value="2"/>'),
+                  '<integer name="shading_samples" value="2"/>',
                   '<integer name="bsdf_samples" value="0"/>',
                   '<integer name="emitter_samples" value="0"/>'):
         p.write_text(base.format(nested="", fov=FOV, dist=DIST, near=NEAR)
@@ -134,6 +135,23 @@ def test_aov_with_nested_integrator(tmp_path):
     img = scene.render(spp=16, seed=0)
     np.testing.assert_allclose(img[..., :3].mean(axis=(0, 1)), [0.25, 0.5, 0.75], rtol=0.02)
     np.testing.assert_array_equal(img[..., scene.channel_names.index("nn.Z")], 1.0)
+
+
+@pytest.mark.parametrize("attrs, message", [
+    ('<integer name="shading_samples" value="2"/><integer name="bsdf_samples" value="1"/>',
+     "cannot specify both 'shading_samples'"),
+    ('<integer name="emitter_samples" value="0"/><integer name="bsdf_samples" value="0"/>',
+     "must have at least 1 BSDF or emitter sample"),
+])
+def test_direct_sample_count_mistakes(tmp_path, attrs, message):
+    from rdsl.runtime.scene import SceneError, load_scene_description
+
+    p = tmp_path / "plane.xml"
+    base = PLANE.replace('<integrator type="aov">', "<!--").replace("</integrator>", "-->")
+    p.write_text(base.format(nested="", fov=FOV, dist=DIST, near=NEAR)
+                 .replace("<sensor", f'<integrator type="direct">{attrs}</integrator><sensor'))
+    with pytest.raises(SceneError, match=message):
+        load_scene_description(p)
 
 
 def test_unknown_integrator_is_a_clear_error(tmp_path):

@@ -36,6 +36,8 @@ from ..ir import (
     Op,
     Param,
     Value,
+    clone_block,
+    replace_uses,
 )
 from . import Pass, register
 
@@ -68,8 +70,6 @@ def _strip(block: Block) -> None:
     """Without AD: derivative(x) = 0, detach(x) = x, a rule = its value."""
     mapping: dict[Value, Value] = {}
     _strip_block(block, mapping)
-    from ..ir import replace_uses
-
     replace_uses(block, mapping)
 
 
@@ -215,7 +215,6 @@ class _Forward:
 
     # -- instructions ------------------------------------------------------------------
     def instr(self, ins: Instr, b: Builder) -> None:
-        ins.operands = [self.renamed.get(v, v) for v in ins.operands]
         op = ins.op
         if op is Op.DERIV:
             self.renamed[ins.result] = self.d(ins.operands[0], b)
@@ -288,8 +287,6 @@ def _new_result(ins: Instr) -> Value:
 
 def _copy(block: Block) -> Block:
     """A copy of ``block`` to try a loop body on (instructions are rebuilt in place)."""
-    from ..ir import clone_block
-
     copy = clone_block(block, {a: a for a in block.args})
     copy.args = list(block.args)
     return copy

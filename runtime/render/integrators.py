@@ -116,28 +116,18 @@ def aov_struct(integ: Any) -> StructType | None:
 
 
 def _channels(integ: Any, struct: StructType) -> list[AovChannel]:
-    """Every field as channels, or the ones an ``aovs`` property (Mitsuba's aov syntax)
-    picks and names."""
+    """Every field as channels, or the ones Mitsuba's ``aovs`` property picks and names
+    (parsed by the loader into ``aov_list``: (name, type) pairs)."""
     fields = dict(struct.fields)
-    spec = integ.params.get("aovs")
-    if spec is None:
+    picked = integ.params.get("aov_list")
+    if picked is None:
         return [AovChannel(f, t, _names(f, t)) for f, t in struct.fields]
-    out = []
-    for token in str(spec).split(","):
-        token = token.strip()
-        if not token:
-            continue
-        item = token.split(":")
-        if len(item) != 2 or not item[0] or not item[1]:
-            raise CompileError(f"{integ.type}: invalid AOV specification `{token}`: require "
-                               "<name>:<type>", integ.loc)
-        name, kind = item
+    for _, kind in picked:
         if kind not in fields:
             raise CompileError(f"{integ.type}: AOV type `{kind}` is not supported by the "
                                f"renderer (supported: {', '.join(fields)})", integ.loc)
-        suffixes = AOV_TYPES.get(kind) or _suffixes(fields[kind])
-        out.append(AovChannel(kind, fields[kind], tuple(f"{name}.{s}" for s in suffixes)))
-    return out
+    return [AovChannel(kind, fields[kind], tuple(f"{name}.{s}" for s in AOV_TYPES[kind]))
+            for name, kind in picked]
 
 
 def _suffixes(t: Type) -> tuple[str, ...]:
@@ -155,7 +145,6 @@ def _names(name: str, t: Type) -> tuple[str, ...]:
 def integrator_plan(integ: Any) -> IntegratorPlan:
     """Plan the scene's integrator; what the renderer cannot run raises a CompileError at
     its XML."""
-    _validate(integ)
     nested = list(integ.children)
     if not nests(integ):
         if nested:
@@ -171,7 +160,6 @@ def integrator_plan(integ: Any) -> IntegratorPlan:
                                f"(got {len(nested)})", integ.loc)
         inner = nested[0] if nested else None
         if inner is not None:
-            _validate(inner)
             if nests(inner):
                 raise CompileError(f"{inner.type}: an integrator that wraps another one "
                                    f"cannot be nested in `{integ.type}` by the renderer yet",
@@ -184,25 +172,6 @@ def integrator_plan(integ: Any) -> IntegratorPlan:
     if source is not None:
         plan.aovs = _channels(source, aov_struct(source))
     return plan
-
-
-def _validate(integ: Any) -> None:
-    """Mitsuba's checks of the ``direct`` integrator's sample counts."""
-    if integ.type != "direct" or getattr(integ, "decl", None) is not None and \
-            not integ.decl.stdlib:
-        return
-    p = integ.params
-    if p.get("shading_samples") is not None and (p.get("emitter_samples") is not None
-                                                 or p.get("bsdf_samples") is not None):
-        raise CompileError("direct: cannot specify both 'shading_samples' and "
-                           "('emitter_samples' and/or 'bsdf_samples')", integ.loc)
-    shading = p.get("shading_samples")
-    shading = 1 if shading is None else int(shading)
-    es, bs = p.get("emitter_samples"), p.get("bsdf_samples")
-    es, bs = (shading if es is None else int(es)), (shading if bs is None else int(bs))
-    if es < 0 or bs < 0 or es + bs == 0:
-        raise CompileError("direct: must have at least 1 BSDF or emitter sample "
-                           "(and no negative counts)", integ.loc)
 
 
 def integrator_instances(integ: Any) -> list[Instance]:

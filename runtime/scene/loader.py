@@ -476,13 +476,20 @@ class _Builder:
                                   _loc(node, "max_depth"))
             if p["rr_depth"] <= 0:
                 raise scene_error("path: 'rr_depth' must be > 0", _loc(node, "rr_depth"))
-        elif obj.type == "direct":
+        elif obj.type == "direct":  # Mitsuba's checks of direct.cpp
             ss = p["shading_samples"]
+            if ss is not None and (p["emitter_samples"] is not None
+                                   or p["bsdf_samples"] is not None):
+                raise scene_error("direct: cannot specify both 'shading_samples' and "
+                                  "('emitter_samples' and/or 'bsdf_samples')", node.loc)
             for k in ("emitter_samples", "bsdf_samples"):
                 if p[k] is None:
                     p[k] = ss if ss is not None else 1
                 if p[k] < 0:
                     raise scene_error(f"direct: '{k}' must be >= 0", _loc(node, k))
+            if p["emitter_samples"] + p["bsdf_samples"] == 0:
+                raise scene_error("direct: must have at least 1 BSDF or emitter sample",
+                                  node.loc)
         elif obj.type == "aov":
             aovs = []
             for item in (s.strip() for s in p["aovs"].split(",")):
