@@ -371,7 +371,7 @@ class _Builder:
         face_normals = bool(p.get("face_normals") or mesh.face_normals)
         p["to_world"] = m
         obj.mesh = meshes.to_world(mesh, m, p["flip_normals"], face_normals)
-        if not np.all(np.abs(obj.mesh.vertices) < F32_OVERFLOW):  # NaN fails this too
+        if not np.all(np.abs(np.asarray(obj.mesh.vertices, np.float64)) < F32_OVERFLOW):
             raise scene_error(f"{self.what(node)}: its vertices in world space are not finite "
                               "32-bit floats (check 'to_world' and the shape's size)",
                               _loc(node, "to_world"))
