@@ -109,7 +109,8 @@ class _Entry:
         try:
             for a in self.info["args"]:
                 if a["kind"] == "uniform":
-                    values.append(_CTYPES[a["dtype"]](next(it)))
+                    v = next(it)  # a number, or already a ctypes value
+                    values.append(_CTYPES[a["dtype"]](getattr(v, "value", v)))
                     continue
                 ptr = next(it)
                 stride = next(it) if a["strided"] else 0

@@ -103,11 +103,11 @@ def test_stdlib_plugin_passes_ptxas(path: Path, arch: str):
 # -- the render kernel --------------------------------------------------------------------
 
 
-def _cbox(accel: str | None = None):
+def _cbox(accel: str | None = None, path: Path = CBOX, variant: str = "rgb"):
     from rdsl.runtime.render.renderer import Scene
 
     kw = {} if accel is None else {"accel": accel}
-    return Scene(CBOX, Build.of(ptx_target(), "rgb"), **kw)
+    return Scene(path, Build.of(ptx_target(), variant), **kw)
 
 
 def test_render_kernel_with_embree_queries_is_refused():
@@ -138,6 +138,43 @@ def _cbox_bvh_module():
 
 def _cbox_bvh_ptx(arch: str) -> str:
     return emit_ptx(_cbox_bvh_module(), ptx_target(arch))
+
+
+# the stdlib integrators besides the Cornell box's path tracer, in its scene
+INTEGRATORS = {
+    "direct": ('<integrator type="direct"/>', "rgb"),
+    "depth": ('<integrator type="depth"/>', "rgb"),
+    "aov": ('<integrator type="aov"><string name="aovs" value="d:depth,n:sh_normal"/>'
+            '<integrator type="path"/></integrator>', "rgb"),
+    "stokes": ('<integrator type="stokes"><integrator type="path"/></integrator>',
+               "spectral_polarized"),
+}
+
+
+def test_every_stdlib_integrator_is_covered():
+    assert {p.stem for p in (STDLIB / "integrator").glob("*.rdsl")} == {*INTEGRATORS, "path"}
+
+
+@cache
+def _integrator_module(name: str, folder: Path):
+    xml, variant = INTEGRATORS[name]
+    text = re.sub(r'<integrator type="path">.*?</integrator>', xml, CBOX.read_text(),
+                  count=1, flags=re.S)
+    path = folder / f"cbox_{name}.xml"
+    path.write_text(text)
+    return _cbox("bvh", path, variant).kernel_ir()
+
+
+@pytest.mark.skipif(not BVH_LANDED, reason="the BVH in rdsl (stdlib/render/bvh.rdsl, "
+                    "issue 14 item 1) has not landed: the render kernel's rays need it")
+@pytest.mark.parametrize("arch", PTX_ARCHS)
+@pytest.mark.parametrize("name", sorted(INTEGRATORS))
+def test_stdlib_integrator_passes_ptxas(name: str, arch: str, tmp_path_factory):
+    exe, gpu = _ptxas(arch)
+    ptx = emit_ptx(_integrator_module(name, tmp_path_factory.getbasetemp()), ptx_target(arch))
+    assert ".visible .entry rdsl_render_sample(" in ptx
+    _check_float_semantics(ptx)
+    run_ptxas(ptx, gpu, exe)
 
 
 # -- the command line ---------------------------------------------------------------------
@@ -213,3 +250,128 @@ def test_gpu_kernels_match_the_cpu():  # pragma: no cover - needs a GPU
           "t": np.ones(n, np.float32), "valid": np.ones(n, bool)}
     got, want = gpu["roughconductor.eval"](si, wo), cpu["roughconductor.eval"](si, wo)
     assert np.array_equal(got.view(np.uint32), want.view(np.uint32))
+
+
+# -- the launcher's marshalling, without a GPU ---------------------------------------------
+
+
+class _HostDriver:
+    """The libcuda calls runtime/cuda.py makes, on host memory: "device" allocations are
+    host buffers, and a launch calls the CPU build's entry point ``rdsl_<name>`` with the
+    argument values the launcher packed (the PTX entry and the C entry take the same
+    arguments, ``base.c_params``).  What this checks is the launcher's side only: which
+    bytes it copies to and from the device, and how it packs the launch's arguments."""
+
+    def __init__(self, cpu_lib) -> None:
+        self.cpu_lib, self.mem, self.names, self.launches = cpu_lib, {}, {}, 0
+
+    def cuInit(self, flags):
+        return 0
+
+    def cuDeviceGetCount(self, ref):
+        ref._obj.value = 1
+        return 0
+
+    def cuDeviceGet(self, ref, ordinal):
+        ref._obj.value = 0
+        return 0
+
+    def cuDevicePrimaryCtxRetain(self, ref, dev):
+        return 0
+
+    def cuCtxSetCurrent(self, ctx):
+        return 0
+
+    def cuModuleLoadData(self, ref, image):
+        assert image.startswith(b"//") and image.endswith(b"\0")  # the PTX text, C string
+        return 0
+
+    def cuModuleGetFunction(self, ref, module, name):
+        ref._obj.value = len(self.names) + 1
+        self.names[ref._obj.value] = name.decode()
+        return 0
+
+    def cuMemAlloc_v2(self, ref, size):
+        import ctypes
+
+        buf = ctypes.create_string_buffer(b"\xa5" * size.value)  # not zeros: copies matter
+        ref._obj.value = ctypes.addressof(buf)
+        self.mem[ref._obj.value] = buf
+        return 0
+
+    def cuMemFree_v2(self, dev):
+        del self.mem[dev.value]
+        return 0
+
+    def cuMemcpyHtoD_v2(self, dev, host, size):
+        import ctypes
+
+        ctypes.memmove(dev.value, host.value, size.value)
+        return 0
+
+    def cuMemcpyDtoH_v2(self, host, dev, size):
+        import ctypes
+
+        ctypes.memmove(host.value, dev.value, size.value)
+        return 0
+
+    def cuLaunchKernel(self, fn, gx, gy, gz, bx, by, bz, shared, stream, params, extra):
+        import ctypes
+
+        entry = getattr(self.cpu_lib, self.names[fn.value])
+        values = []
+        for k, t in enumerate(entry.argtypes):
+            t = ctypes.c_uint64 if t is ctypes.c_void_p else t
+            values.append(ctypes.cast(params[k], ctypes.POINTER(t)).contents.value)
+        entry(*values)
+        self.launches += 1
+        return 0
+
+    def cuCtxSynchronize(self):
+        return 0
+
+
+MARSHAL = """
+fn splat(out: [Float], i: Int, p: Vec3, w: Float) -> Vec2 {
+    out[i] = p.x * w + p.z;
+    return Vec2(p.y * w, w);
+}
+"""
+
+
+@pytest.mark.parametrize("source", ["roughconductor", "splat"])
+def test_launcher_packs_and_copies_what_the_cpu_entry_reads(source: str, monkeypatch,
+                                                            tmp_path: Path):
+    import rdsl.runtime.cuda as cuda
+    from rdsl.compiler.backends.clib import manifest
+
+    src = STDLIB / "bsdf" / "roughconductor.rdsl" if source == "roughconductor" else MARSHAL
+    cpu = rdsl.jit(src, target="scalar")
+    module, _ = compile_kernels(src, Build.of(ptx_target(), "rgb"))
+    fake = _HostDriver(cpu._lib)
+    monkeypatch.setattr(cuda, "_driver", lambda: fake)
+    gpu = cuda.CudaModule(manifest(module, ptx_target()), emit_ptx(module))
+    rng = np.random.default_rng(5)
+    n = 257
+    mask = rng.random(n) < 0.7
+    if source == "roughconductor":
+        vec = lambda k: rng.uniform(-1, 1, (n, k)).astype(np.float32)  # noqa: E731
+        si = {"p": vec(3), "n": vec(3), "sh_n": vec(3), "uv": vec(2), "wi": vec(3),
+              "t": np.ones(n, np.float32), "valid": mask}
+        wo = vec(3)[:, ::-1]  # a strided view: negative-free strides, not contiguous
+        calls = [("roughconductor.eval", (si, wo), {"alpha": 0.3}),
+                 ("roughconductor.pdf", (si, wo), {"mask": mask})]
+    else:
+        p = rng.uniform(-1, 1, (n, 3)).astype(np.float32)
+        idx = rng.permutation(n).astype(np.int32)
+        calls = [("splat", (np.zeros(n, np.float32), idx, p, np.float32(0.5)), {})]
+    for name, args, kw in calls:
+        want = cpu[name](*[a.copy() if isinstance(a, np.ndarray) else a for a in args], **kw)
+        got_args = [a.copy() if isinstance(a, np.ndarray) else a for a in args]
+        got = gpu[name](*got_args, **kw)
+        assert np.array_equal(np.asarray(got).view(np.uint32), np.asarray(want).view(np.uint32))
+        if source == "splat":  # the buffer written on the device came back
+            ref = args[0].copy()
+            cpu[name](ref, *args[1:])
+            assert np.array_equal(got_args[0], ref) and np.count_nonzero(ref) > n // 2
+    assert fake.launches == len(calls) and not fake.mem  # one launch per call, all freed
