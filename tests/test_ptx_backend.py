@@ -81,6 +81,7 @@ def _check_float_semantics(ptx: str) -> None:
     assert not re.search(r"\b(div|sqrt)\.(approx|full)", ptx), "an approximate div/sqrt"
     assert ".ftz" not in ptx, "flush to zero"
     assert ".extern" not in ptx, "an unresolved function"
+    assert "fma." not in ptx, "a fused multiply-add (the IR has none)"
 
 
 @pytest.mark.parametrize("arch", PTX_ARCHS)
@@ -375,3 +376,82 @@ def test_launcher_packs_and_copies_what_the_cpu_entry_reads(source: str, monkeyp
             cpu[name](ref, *args[1:])
             assert np.array_equal(got_args[0], ref) and np.count_nonzero(ref) > n // 2
     assert fake.launches == len(calls) and not fake.mem  # one launch per call, all freed
+
+
+# -- float `rem`: exact on the GPU too -----------------------------------------------------
+
+
+def _fmodf_on_cpu():
+    """rdsl.fmodf (ptx_ops.define_fmodf), JIT-compiled for this CPU behind an array loop."""
+    import ctypes
+
+    import llvmlite.binding as llvm
+    import llvmlite.ir as L
+    from rdsl.compiler.backends.ptx_ops import define_fmodf
+
+    mod = L.Module("fmodf")
+    mod.triple = llvm.get_default_triple()
+    f32, i64, ptr = L.FloatType(), L.IntType(64), L.PointerType()
+    fm = define_fmodf(mod)
+    fn = L.Function(mod, L.FunctionType(L.VoidType(), [ptr, ptr, ptr, i64]), "apply")
+    x, y, out, n = fn.args
+    pre = fn.append_basic_block("entry")
+    loop, done = fn.append_basic_block("loop"), fn.append_basic_block("done")
+    b = L.IRBuilder(pre)
+    b.cbranch(b.icmp_signed(">", n, L.Constant(i64, 0)), loop, done)
+    b.position_at_end(loop)
+    i = b.phi(i64)
+    i.add_incoming(L.Constant(i64, 0), pre)
+    load = lambda p: b.load(b.gep(p, [i], source_etype=f32), typ=f32)  # noqa: E731
+    b.store(b.call(fm, [load(x), load(y)]), b.gep(out, [i], source_etype=f32))
+    nxt = b.add(i, L.Constant(i64, 1))
+    i.add_incoming(nxt, loop)
+    b.cbranch(b.icmp_signed("<", nxt, n), loop, done)
+    b.position_at_end(done)
+    b.ret_void()
+    llvm.initialize_native_target()
+    llvm.initialize_native_asmprinter()
+    ref = llvm.parse_assembly(str(mod))
+    ref.verify()
+    tm = llvm.Target.from_default_triple().create_target_machine()
+    engine = llvm.create_mcjit_compiler(ref, tm)
+    engine.finalize_object()
+    cfn = ctypes.CFUNCTYPE(None, ctypes.c_void_p, ctypes.c_void_p, ctypes.c_void_p,
+                           ctypes.c_int64)(engine.get_function_address("apply"))
+
+    def run(a: np.ndarray, b_: np.ndarray) -> np.ndarray:
+        out = np.empty_like(a)
+        cfn(a.ctypes.data, b_.ctypes.data, out.ctypes.data, len(a))
+        return out
+    run.engine = engine  # keep the code alive
+    return run
+
+
+def test_ptx_float_rem_is_fmodf_bit_for_bit():
+    """The function the ptx target calls for float `rem`, run on the CPU (the same LLVM IR;
+    integer ops only), against numpy's fmod on random bit patterns of every magnitude,
+    subnormals, zeros, infinities and NaNs."""
+    rng = np.random.default_rng(7)
+    n = 400_000
+    x = rng.integers(0, 2**32, n, dtype=np.uint64).astype(np.uint32).view(np.float32)
+    y = rng.integers(0, 2**32, n, dtype=np.uint64).astype(np.uint32).view(np.float32)
+    with np.errstate(over="ignore", invalid="ignore"):  # y near x: few quotient bits
+        near = (x * rng.uniform(0.1, 3.0, n).astype(np.float32)).astype(np.float32)
+    special = np.array([0.0, -0.0, np.inf, -np.inf, np.nan, 1e-45, -1e-45, 1.1754942e-38,
+                        3.4028235e38, 1.0, -1.0, 0.1, 7.0], np.float32)
+    sx, sy = (a.ravel() for a in np.meshgrid(special, special))
+    xs = np.concatenate([x, x, sx, np.full(1000, 2.0**100, np.float32)])
+    ys = np.concatenate([y, near, sy, np.full(1000, 3.0, np.float32)])
+    got = _fmodf_on_cpu()(xs, ys)
+    with np.errstate(invalid="ignore"):
+        want = np.fmod(xs, ys)
+    same = (got.view(np.uint32) == want.view(np.uint32)) | (np.isnan(got) & np.isnan(want))
+    assert same.all(), (xs[~same][:5], ys[~same][:5], got[~same][:5], want[~same][:5])
+
+
+def test_float_rem_in_ptx_calls_it_and_no_fma():
+    module, _ = compile_kernels("fn m(a: Float, b: Float) -> Float { return a % b; }",
+                                Build.of(ptx_target(), "rgb"))
+    ptx = emit_ptx(module, ptx_target("sm_80"))
+    assert "clz.b32" in ptx and "fma" not in ptx and "cvt.rzi" not in ptx
+    _check_float_semantics(ptx)

@@ -60,11 +60,14 @@ class _ModuleLowering:
         self.mod.triple = target.triple
         self._intrinsics: dict[str, L.Function] = {}
         self.entry = emit_kernel  # the entry points around each body: C, or CUDA's
+        self.rules = LOWER  # the lowering rule of each op (llvm_ops)
         if target.backend == "ptx":
             from .ptx_entry import check_ptx_module, emit_ptx_kernel
+            from .ptx_ops import PTX_LOWER
 
             check_ptx_module(module)
             self.entry = emit_ptx_kernel
+            self.rules = {**LOWER, **PTX_LOWER}
 
     # -- small utilities -----------------------------------------------------------------
     def intrinsic(self, name: str, ret: L.Type, args: list[L.Type]) -> L.Function:
