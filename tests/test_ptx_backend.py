@@ -20,7 +20,6 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-
 import rdsl
 from rdsl.compiler.backends.ptx import (
     emit_ptx,
@@ -145,8 +144,8 @@ def _cbox_bvh_ptx(arch: str) -> str:
 INTEGRATORS = {
     "direct": ('<integrator type="direct"/>', "rgb"),
     "depth": ('<integrator type="depth"/>', "rgb"),
-    "aov": ('<integrator type="aov"><string name="aovs" value="d:depth,n:sh_normal"/>'
-            '<integrator type="path"/></integrator>', "rgb"),
+    "aov": (('<integrator type="aov"><string name="aovs" value="d:depth,n:sh_normal"/>'
+             '<integrator type="path"/></integrator>'), "rgb"),
     "stokes": ('<integrator type="stokes"><integrator type="path"/></integrator>',
                "spectral_polarized"),
 }
@@ -160,7 +159,7 @@ def test_every_stdlib_integrator_is_covered():
 def _integrator_module(name: str, folder: Path):
     xml, variant = INTEGRATORS[name]
     text = re.sub(r'<integrator type="path">.*?</integrator>', xml, CBOX.read_text(),
-                  count=1, flags=re.S)
+                  count=1, flags=re.DOTALL)
     path = folder / f"cbox_{name}.xml"
     path.write_text(text)
     return _cbox("bvh", path, variant).kernel_ir()
@@ -193,7 +192,7 @@ def test_compile_writes_ptx_and_manifest(tmp_path: Path):
         assert f".visible .entry {k['symbol']}(" in ptx
         # n, then each argument (and the stride of an array), then the mask and its stride
         params = 1 + sum(1 + a["strided"] for a in k["args"]) + 2
-        decl = re.search(rf"\.entry {k['symbol']}\((.*?)\)", ptx, re.S).group(1)
+        decl = re.search(rf"\.entry {k['symbol']}\((.*?)\)", ptx, re.DOTALL).group(1)
         assert decl.count(".param") == params
     assert not (tmp_path / "d.so").exists()
 
@@ -343,8 +342,8 @@ fn splat(out: [Float], i: Int, p: Vec3, w: Float) -> Vec2 {
 @pytest.mark.parametrize("source", ["roughconductor", "splat"])
 def test_launcher_packs_and_copies_what_the_cpu_entry_reads(source: str, monkeypatch,
                                                             tmp_path: Path):
-    import rdsl.runtime.cuda as cuda
     from rdsl.compiler.backends.clib import manifest
+    from rdsl.runtime import cuda
 
     src = STDLIB / "bsdf" / "roughconductor.rdsl" if source == "roughconductor" else MARSHAL
     cpu = rdsl.jit(src, target="scalar")
@@ -356,7 +355,7 @@ def test_launcher_packs_and_copies_what_the_cpu_entry_reads(source: str, monkeyp
     n = 257
     mask = rng.random(n) < 0.7
     if source == "roughconductor":
-        vec = lambda k: rng.uniform(-1, 1, (n, k)).astype(np.float32)  # noqa: E731
+        vec = lambda k: rng.uniform(-1, 1, (n, k)).astype(np.float32)
         si = {"p": vec(3), "n": vec(3), "sh_n": vec(3), "uv": vec(2), "wi": vec(3),
               "t": np.ones(n, np.float32), "valid": mask}
         wo = vec(3)[:, ::-1]  # a strided view: negative-free strides, not contiguous
@@ -402,7 +401,7 @@ def _fmodf_on_cpu():
     b.position_at_end(loop)
     i = b.phi(i64)
     i.add_incoming(L.Constant(i64, 0), pre)
-    load = lambda p: b.load(b.gep(p, [i], source_etype=f32), typ=f32)  # noqa: E731
+    load = lambda p: b.load(b.gep(p, [i], source_etype=f32), typ=f32)
     b.store(b.call(fm, [load(x), load(y)]), b.gep(out, [i], source_etype=f32))
     nxt = b.add(i, L.Constant(i64, 1))
     i.add_incoming(nxt, loop)

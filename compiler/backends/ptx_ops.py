@@ -31,7 +31,7 @@ def define_fmodf(mod: L.Module) -> L.Function:
     b = L.IRBuilder(fn.append_basic_block("entry"))
     ctlz = L.Function(mod, L.FunctionType(I32, [I32, I1]), "llvm.ctlz.i32") \
         if "llvm.ctlz.i32" not in mod.globals else mod.globals["llvm.ctlz.i32"]
-    c = lambda v: const(I32, v)  # noqa: E731
+    c = lambda v: const(I32, v)
     ux, uy = b.bitcast(x, I32), b.bitcast(y, I32)
     ex, ey = (b.and_(b.lshr(u, c(23)), c(0xFF)) for u in (ux, uy))
     sx = b.and_(ux, c(-0x80000000))
