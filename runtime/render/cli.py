@@ -67,6 +67,7 @@ def render_command(args: Any) -> int:
             print(f"rdsl render: --target ptx needs a CUDA GPU: {reason}", file=sys.stderr)
             return 1
         args.target = ptx_target(device_arch())
+        args.accel = "bvh"  # Embree runs on the CPU: GPU rays go through the BVH in rdsl
     build = Build.of(args.target, args.variant)  # a bad name fails before the scene loads
     scene_path = Path(args.scene)
     if not scene_path.is_file():
