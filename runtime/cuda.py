@@ -23,11 +23,9 @@ from typing import Any
 import numpy as np
 
 from .api import Module
-from .kernel import Kernel
+from .kernel import _C_DTYPES, _CTYPES, Kernel
 
-_ITEM = {"f32": 4, "i32": 4, "u32": 4, "u64": 8, "bool": 1}
-_CTYPES = {"f32": ctypes.c_float, "i32": ctypes.c_int32, "u32": ctypes.c_uint32,
-           "u64": ctypes.c_uint64, "bool": ctypes.c_uint8}
+_ITEM = {d: t.itemsize for d, t in _C_DTYPES.items()}  # bytes of an element in memory
 _CC_MAJOR, _CC_MINOR = 75, 76  # CU_DEVICE_ATTRIBUTE_COMPUTE_CAPABILITY_*
 BLOCK = 128  # threads per block
 

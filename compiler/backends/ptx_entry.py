@@ -28,11 +28,10 @@ import llvmlite.ir as L
 from .. import ir
 from ..diagnostics import CompileError
 from .base import c_arg_names, c_args, c_name, split_params
-from .llvm_ops import I1, I8, I32, I64, MEM, PTR, const
+from .llvm_ops import ALIGN, I1, I8, I32, I64, MEM, PTR, const
 
 GLOBAL = L.PointerType(addrspace=1)  # CUDA global memory
 SREG = "llvm.nvvm.read.ptx.sreg."
-ALIGN = {"f32": 4, "i32": 4, "u32": 4, "u64": 8, "bool": 1}
 _RAY_OPS = {ir.Op.INTERSECT: "trace", ir.Op.OCCLUDED: "occluded"}
 
 
