@@ -4,7 +4,9 @@
 ``llvmlite.binding.get_host_cpu_features()``.  ``get_target("c", width)`` is the SIMD C
 target (``backend == "c"``, see ``backends/c.py``) at width 1, 4, 8 or 16, compiled by the
 machine's ``cc`` for the machine itself (``-march=native``); without a width it takes the
-host's widest LLVM target's.
+host's widest LLVM target's.  ``get_target("ptx")`` (or :func:`ptx_target` with an
+``sm_XY`` architecture) is CUDA PTX through LLVM's NVPTX backend: width 1, one lane per CUDA
+thread (``backends/ptx.py``).
 """
 
 from __future__ import annotations
@@ -28,10 +30,12 @@ class Target:
     features: str
     requires: tuple[str, ...] = ()
     vector_bits: int = 128
-    backend: str = "llvm"  # which code generator: "llvm" or "c"
+    backend: str = "llvm"  # which code generator: "llvm", "c" or "ptx" (LLVM's NVPTX)
 
     @property
     def triple(self) -> str:
+        if self.backend == "ptx":
+            return "nvptx64-nvidia-cuda"
         import llvmlite.binding as llvm
 
         return llvm.get_default_triple()
@@ -89,6 +93,8 @@ def host_supports(target: Target | str) -> bool:
     t = get_target(target) if isinstance(target, str) else target
     if t.backend == "c":  # compiled by this machine's cc, for this machine
         return True
+    if t.backend == "ptx":  # runs on a CUDA GPU (runtime/cuda.py), never on the CPU
+        return False
     feats = host_features()
     if not feats:
         return t.name == "scalar"
@@ -116,6 +122,18 @@ def c_target(width: int | None = None) -> Target:
     return Target("c", width, "native", "", (), 32 * width, backend="c")
 
 
+PTX_ARCHS = ("sm_70", "sm_80", "sm_90")  # Volta, Ampere, Hopper
+
+
+def ptx_target(arch: str = "sm_70") -> Target:
+    """CUDA PTX for GPU architecture ``arch`` (``sm_70``, ``sm_80`` or ``sm_90``); a GPU of
+    that architecture or a newer one runs it."""
+    if arch not in PTX_ARCHS:
+        raise CompileError(f"unknown GPU architecture `{arch}` for target `ptx` (valid: "
+                           f"{', '.join(PTX_ARCHS)})")
+    return Target("ptx", 1, arch, "", (), 32, backend="ptx")
+
+
 def get_target(name: str | Target, width: int | None = None) -> Target:
     """Look a target up by name (``scalar``, ``sse4``, ``avx2``, ``avx512``, ``host`` or
     ``c``).  ``width`` picks the width of ``c``; an LLVM target has its own, which a
@@ -124,12 +142,14 @@ def get_target(name: str | Target, width: int | None = None) -> Target:
         t = name
     elif name == "c":
         return c_target(width)
+    elif name == "ptx":
+        t = ptx_target()
     elif name == "host":
         t = host_target()
     else:
         found = TARGETS.get(name)
         if found is None:
-            valid = ", ".join([*TARGETS, "host", "c"])
+            valid = ", ".join([*TARGETS, "host", "c", "ptx"])
             raise CompileError(f"unknown target `{name}` (valid targets: {valid})")
         t = found
     if width is not None and width != t.width:

@@ -209,6 +209,10 @@ def jit(source_or_path: str | os.PathLike, target: str | Target = "host",
 
     t0 = time.perf_counter()
     build = build or Build.of(target, variant, width)
+    if build.target.backend == "ptx":  # kernels on a CUDA GPU, not a CPU library
+        from .cuda import jit_ptx
+
+        return jit_ptx(source_or_path, build, **options)
     text = _source_text(source_or_path)
     files = [Path(f) for f in source_files(source_or_path, options.get("search_paths") or (),
                                            filename=options.get("filename"))]

@@ -282,6 +282,21 @@ class Scene:
 
         if self._module is not None and not again:
             return self._module
+        src, scene, filename = self._kernel_inputs()
+        mod = jit(src, build=self.build, scene=scene, search_paths=self.search_paths,
+                  filename=filename)
+        if not self.specialize:  # and so do the tables the plugins compute per scene
+            self.prm = fill_tables(mod, self.scene_spec, self.prm, src, filename,
+                                   self.search_paths)
+        self._module = mod
+        self.compile_seconds = mod.compile_seconds
+        self.from_cache = mod.from_cache
+        return mod
+
+    def _kernel_inputs(self) -> tuple[str, SceneSpec, str]:
+        """The render kernel's source, what specialize is told about the scene, and the
+        file name its diagnostics show; sets the report, kernel_src, scene_spec and
+        search_paths (and PRM, for the generic build)."""
         src = kernel_source(self.desc, self.buffers, self.bsdfs, self.emitters,
                             self.build.model, derivative=self.derivative)
         scene = self.scene_spec_for_params()
@@ -295,16 +310,17 @@ class Scene:
             scene, prm = parameter_slots(scene, self.build.model)
             if not self._prm_set:
                 self.prm = prm
-        filename = str(self.path.with_suffix(".rdsl"))
-        mod = jit(src, build=self.build, scene=scene, search_paths=self.search_paths,
-                  filename=filename)
-        if not self.specialize:  # and so do the tables the plugins compute per scene
-            self.prm = fill_tables(mod, self.scene_spec, self.prm, src, filename,
-                                   self.search_paths)
-        self._module = mod
-        self.compile_seconds = mod.compile_seconds
-        self.from_cache = mod.from_cache
-        return mod
+        return src, scene, str(self.path.with_suffix(".rdsl"))
+
+    def kernel_ir(self) -> Any:
+        """The render kernels as IR after the whole pipeline for this scene's build (no
+        library: what ``emit_ptx`` or ``rdsl compile`` of another target starts from)."""
+        from ...compiler.driver import compile_kernels
+
+        src, scene, filename = self._kernel_inputs()
+        module, _ = compile_kernels(src, self.build, scene=scene, filename=filename,
+                                    search_paths=self.search_paths)
+        return module
 
     def scene_spec_for_params(self) -> SceneSpec:
         """What ``specialize`` is told about the scene: its instances and kinds."""
