@@ -43,8 +43,9 @@ def add_commands(sub: argparse._SubParsersAction) -> dict[str, Command]:
     k = sub.add_parser("compile", help="compile to a shared library, C header and manifest")
     k.add_argument("file")
     k.add_argument("--target", default="host",
-                   help="scalar, sse4, avx2, avx512, host (default), or c (SIMD C source "
-                        "compiled by the machine's cc)")
+                   help="scalar, sse4, avx2, avx512, host (default), c (SIMD C source "
+                        "compiled by the machine's cc), or opencl (STEM.cl: OpenCL C, built "
+                        "by the OpenCL driver when loaded)")
     k.add_argument("--width", type=int, default=None, help=_WIDTH_HELP)
     k.add_argument("--variant", default="rgb", help=_VARIANTS_HELP)
     k.add_argument("-o", "--output", default=None,
@@ -117,9 +118,10 @@ def _compile(args: argparse.Namespace) -> int:
 
     build = Build.of(args.target, args.variant, args.width, args.ad)
     tgt = build.target
-    if (args.emit == "c") != (tgt.backend == "c") and args.emit != "lib":
+    if args.emit != "lib" and tgt.backend != ("c" if args.emit == "c" else "llvm"):
+        other = "c or lib" if tgt.backend == "c" else "lib"
         raise CompileError(f"--emit {args.emit} needs " + ("--target c" if args.emit == "c"
-                           else f"an LLVM target, not `{tgt.name}` (use --emit c or lib)"))
+                           else f"an LLVM target, not `{tgt.name}` (use --emit {other})"))
     src = _require_file(args.file).resolve()
     module, _ = compile_kernels(src, build)
     if args.emit in ("llvm", "asm", "obj"):
@@ -135,9 +137,9 @@ def _compile(args: argparse.Namespace) -> int:
         print(f"wrote {out}")
         return 0
     stem = Path(args.output) if args.output else Path(src.stem)
-    if stem.suffix in (".so", ".h", ".json", ".c"):
+    if stem.suffix in (".so", ".h", ".json", ".c", ".cl"):
         stem = stem.with_suffix("")
-    for ext in (".so", ".h", ".json", ".c"):
+    for ext in (".so", ".h", ".json", ".c", ".cl"):
         _refuse_input(stem.with_suffix(ext) if stem.suffix == "" else
                       Path(str(stem) + ext), src)
     out_dir = stem.parent if str(stem.parent) else Path(".")

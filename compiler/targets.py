@@ -4,7 +4,9 @@
 ``llvmlite.binding.get_host_cpu_features()``.  ``get_target("c", width)`` is the SIMD C
 target (``backend == "c"``, see ``backends/c.py``) at width 1, 4, 8 or 16, compiled by the
 machine's ``cc`` for the machine itself (``-march=native``); without a width it takes the
-host's widest LLVM target's.
+host's widest LLVM target's.  ``get_target("opencl")`` is OpenCL C (``backends/opencl.py``):
+width 1, one lane per work-item, the OpenCL runtime (PoCL on a CPU) spreads the work-items
+over SIMD lanes and cores.
 """
 
 from __future__ import annotations
@@ -28,7 +30,7 @@ class Target:
     features: str
     requires: tuple[str, ...] = ()
     vector_bits: int = 128
-    backend: str = "llvm"  # which code generator: "llvm" or "c"
+    backend: str = "llvm"  # which code generator: "llvm", "c" or "opencl"
 
     @property
     def triple(self) -> str:
@@ -87,7 +89,7 @@ def host_features() -> frozenset[str]:
 def host_supports(target: Target | str) -> bool:
     """True if code compiled for ``target`` can run on this machine."""
     t = get_target(target) if isinstance(target, str) else target
-    if t.backend == "c":  # compiled by this machine's cc, for this machine
+    if t.backend in ("c", "opencl"):  # compiled on this machine (cc, the OpenCL driver)
         return True
     feats = host_features()
     if not feats:
@@ -104,6 +106,8 @@ def host_target() -> Target:
 
 
 C_WIDTHS = (1, 4, 8, 16)
+# OpenCL C: scalar code per work-item (width 1); the OpenCL compiler vectorizes work-groups
+OPENCL = Target("opencl", 1, "opencl", "", (), 32, backend="opencl")
 
 
 def c_target(width: int | None = None) -> Target:
@@ -118,18 +122,20 @@ def c_target(width: int | None = None) -> Target:
 
 def get_target(name: str | Target, width: int | None = None) -> Target:
     """Look a target up by name (``scalar``, ``sse4``, ``avx2``, ``avx512``, ``host`` or
-    ``c``).  ``width`` picks the width of ``c``; an LLVM target has its own, which a
-    different ``width`` contradicts (a diagnostic)."""
+    ``c``) or ``opencl``.  ``width`` picks the width of ``c``; any other target has its own,
+    which a different ``width`` contradicts (a diagnostic)."""
     if isinstance(name, Target):
         t = name
     elif name == "c":
         return c_target(width)
+    elif name == "opencl":
+        t = OPENCL
     elif name == "host":
         t = host_target()
     else:
         found = TARGETS.get(name)
         if found is None:
-            valid = ", ".join([*TARGETS, "host", "c"])
+            valid = ", ".join([*TARGETS, "host", "c", "opencl"])
             raise CompileError(f"unknown target `{name}` (valid targets: {valid})")
         t = found
     if width is not None and width != t.width:

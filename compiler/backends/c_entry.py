@@ -15,7 +15,7 @@ from .. import ir
 from ..diagnostics import CompileError
 from .base import CArg, c_arg_names, c_args, c_name, c_params, kernels, split_params
 from .c import VEC_NAMES, SimdC
-from .c_like import MEM_C, SCALAR_C, f32_literal
+from .c_like import MEM_C, SCALAR_C, table_decls
 
 _INTRINSICS = {  # W -> (guard, sqrt, floor, ceil, any) on x86
     4: ("defined(__SSE4_1__)", "_mm_sqrt_ps", "_mm_floor_ps", "_mm_ceil_ps",
@@ -100,11 +100,7 @@ def module_source(module: ir.Module, width: int, stem: str) -> str:
         bodies += lines
         tables.update(tabs)
     out = prelude(width, stem)
-    for name, values in tables.items():
-        out.append(f"static const float {name}[{len(values)}] = {{")
-        for k in range(0, len(values), 6):
-            out.append("    " + ", ".join(f32_literal(v) for v in values[k:k + 6]) + ",")
-        out.append("};")
+    out += table_decls(tables, "static const")
     return "\n".join(out + [""] + bodies) + "\n"
 
 

@@ -1,4 +1,4 @@
-"""The C-like printer shared by the SIMD C backend (``c.py``) and, later, OpenCL C.
+"""The C-like printer shared by the SIMD C backend (``c.py``) and OpenCL C (``opencl.py``).
 
 It prints the body of one kernel, post-vectorize scalar IR, as C statements: one variable
 per SSA value (``T vN = expr;``), structured ``if`` as C ``if``/``else`` assigning the
@@ -55,6 +55,18 @@ def int_literal(value: Any, dtype: str) -> str:
             v -= 1 << 32
         return "(-2147483647 - 1)" if v == -(1 << 31) else (f"({v})" if v < 0 else str(v))
     return f"{v}u" if dtype == "u32" else f"{v}ull"
+
+
+def table_decls(tables: dict[str, list[float]], qualifier: str) -> list[str]:
+    """File-scope declarations of read-only f32 tables (``qualifier``: ``static const`` in
+    C, ``__constant`` in OpenCL C)."""
+    out = []
+    for name, values in tables.items():
+        out.append(f"{qualifier} float {name}[{len(values)}] = {{")
+        for k in range(0, len(values), 6):
+            out.append("    " + ", ".join(f32_literal(v) for v in values[k:k + 6]) + ",")
+        out.append("};")
+    return out
 
 
 class CLikePrinter:
