@@ -20,7 +20,7 @@ import numpy as np
 
 from ..compiler.diagnostics import CompileError
 from .api import Module
-from .kernel import _C_DTYPES, DTYPES, Kernel, Pending, _leaf_memory, _mask_array
+from .kernel import _C_DTYPES, Kernel, Pending, _leaf_memory, _mask_array
 
 # the numpy type of a uniform argument of each dtype (OpenCL kernels take no bools: int)
 _UNIFORM_NP = {"f32": np.float32, "i32": np.int32, "u32": np.uint32, "u64": np.uint64,
@@ -226,5 +226,4 @@ class ClKernel(Kernel):
         queue.finish()
 
 
-__all__ = ["ClKernel", "ClModule", "OpenCLUnavailable", "load_opencl", "opencl_context",
-           "DTYPES"]
+__all__ = ["ClKernel", "ClModule", "OpenCLUnavailable", "load_opencl", "opencl_context"]
