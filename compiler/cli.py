@@ -20,8 +20,8 @@ Command = Callable[[argparse.Namespace], int]
 _VARIANTS_HELP = ", ".join(VARIANTS) + " (default: rgb)"
 _AD_HELP = ("differentiate: 'forward' gives each kernel with Float arguments a tangent "
             "argument per argument and a tangent result per Float result (docs/ad.md)")
-_WIDTH_HELP = ("SIMD width of target c: 1, 4, 8 or 16 (default: the host's widest); the "
-               "LLVM targets have their own")
+_WIDTH_HELP = ("SIMD width of target c, or the lanes per work-item of target opencl: 1, 4, "
+               "8 or 16 (default: the host's widest); the LLVM targets have their own")
 
 
 def add_commands(sub: argparse._SubParsersAction) -> dict[str, Command]:

@@ -4,9 +4,10 @@
 ``llvmlite.binding.get_host_cpu_features()``.  ``get_target("c", width)`` is the SIMD C
 target (``backend == "c"``, see ``backends/c.py``) at width 1, 4, 8 or 16, compiled by the
 machine's ``cc`` for the machine itself (``-march=native``); without a width it takes the
-host's widest LLVM target's.  ``get_target("opencl")`` is OpenCL C (``backends/opencl.py``):
-width 1, one lane per work-item, the OpenCL runtime (PoCL on a CPU) spreads the work-items
-over SIMD lanes and cores.
+host's widest LLVM target's.  ``get_target("opencl", width)`` is OpenCL C
+(``backends/opencl.py``): W lanes per work-item as OpenCL vectors (1, 4, 8 or 16; by
+default as many as the widest LLVM target's), run by the machine's OpenCL driver (PoCL on a
+CPU, which compiles for the host).
 """
 
 from __future__ import annotations
@@ -106,30 +107,29 @@ def host_target() -> Target:
 
 
 C_WIDTHS = (1, 4, 8, 16)
-# OpenCL C: scalar code per work-item (width 1); the OpenCL compiler vectorizes work-groups
-OPENCL = Target("opencl", 1, "opencl", "", (), 32, backend="opencl")
 
 
-def c_target(width: int | None = None) -> Target:
-    """The SIMD C target of ``width`` lanes (default: the host's widest LLVM target's)."""
+def c_target(width: int | None = None, backend: str = "c") -> Target:
+    """The SIMD C target of ``width`` lanes (default: the host's widest LLVM target's), or
+    with ``backend="opencl"`` the OpenCL C target (``width`` lanes per work-item)."""
     if width is None:
         width = host_target().width
     if width not in C_WIDTHS:
-        raise CompileError(f"unsupported SIMD width {width} for target `c` (valid widths: "
-                           f"{', '.join(map(str, C_WIDTHS))})")
-    return Target("c", width, "native", "", (), 32 * width, backend="c")
+        raise CompileError(f"unsupported SIMD width {width} for target `{backend}` (valid "
+                           f"widths: {', '.join(map(str, C_WIDTHS))})")
+    return Target(backend, width, "native" if backend == "c" else backend, "", (),
+                  32 * width, backend=backend)
 
 
 def get_target(name: str | Target, width: int | None = None) -> Target:
     """Look a target up by name (``scalar``, ``sse4``, ``avx2``, ``avx512``, ``host`` or
-    ``c``) or ``opencl``.  ``width`` picks the width of ``c``; any other target has its own,
+    ``c``) or ``opencl``.  ``width`` picks the width of ``c`` and ``opencl``; an LLVM target
+    has its own,
     which a different ``width`` contradicts (a diagnostic)."""
     if isinstance(name, Target):
         t = name
-    elif name == "c":
-        return c_target(width)
-    elif name == "opencl":
-        t = OPENCL
+    elif name in ("c", "opencl"):
+        return c_target(width, name)
     elif name == "host":
         t = host_target()
     else:
@@ -139,9 +139,9 @@ def get_target(name: str | Target, width: int | None = None) -> Target:
             raise CompileError(f"unknown target `{name}` (valid targets: {valid})")
         t = found
     if width is not None and width != t.width:
-        if t.backend == "c":
-            return c_target(width)
+        if t.backend in ("c", "opencl"):
+            return c_target(width, t.backend)
         raise CompileError(f"target `{t.name}` has SIMD width {t.width}, not {width} "
-                           "(a width can be chosen for target `c`, which takes "
+                           "(a width can be chosen for targets `c` and `opencl`, which take "
                            f"{', '.join(map(str, C_WIDTHS))})")
     return t

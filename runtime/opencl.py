@@ -5,7 +5,8 @@ elsewhere), with the call interface of the CPU kernels: numpy arrays in, numpy a
 (``rdsl.compiler.backends.opencl``) and returns a :class:`ClModule` of :class:`ClKernel` s.
 A kernel keeps one device buffer per argument, made on the first call and reused by every
 later call over as many elements or fewer (grown when a call needs more).  A call copies
-its inputs to the device, runs one work-item per element and copies the results back.
+its inputs to the device, runs one work-item per W elements (the build's width) and copies
+the results back.
 
 pyopencl and the OpenCL platform are looked up lazily: without them, loading an ``opencl``
 build raises one clear :class:`OpenCLUnavailable` naming the package to install.
@@ -25,7 +26,7 @@ from .kernel import _C_DTYPES, Kernel, Pending, _leaf_memory, _mask_array
 # the numpy type of a uniform argument of each dtype (OpenCL kernels take no bools: int)
 _UNIFORM_NP = {"f32": np.float32, "i32": np.int32, "u32": np.uint32, "u64": np.uint64,
                "bool": np.int32}
-LOCAL_SIZE = 64  # work-items per work-group (PoCL vectorizes a work-group's loop)
+LOCAL_SIZE = 16  # work-items per work-group (each runs W lanes; 4 to 64 measure alike)
 
 _CONTEXT: list[Any] = []  # (context, queue, device name), made once per process
 
@@ -184,6 +185,8 @@ class ClKernel(Kernel):
         arrays in order (1-D, any stride; bools as uint8)."""
         cl = self._cl
         queue = opencl_context()[1]
+        items = -(-n // self.width)  # work-items: W elements each
+        pad = items * self.width
         kargs: list[Any] = [np.int64(n)]
         keep: list[np.ndarray] = []
         back: list[tuple[np.ndarray, np.ndarray, Any]] = []  # host array, staging, device
@@ -199,7 +202,9 @@ class ClKernel(Kernel):
             else:  # a buffer is updated in place; an output staged contiguously
                 host = v if kind == "buffer" else next(out_iter)
                 arr = np.ascontiguousarray(host)
-            buf = self._buffer_for(slot, arr.nbytes)
+            # the arrays a work-item reads W at a time hold n rounded up to W elements
+            size = arr.nbytes if kind == "buffer" or broadcast else pad * arr.itemsize
+            buf = self._buffer_for(slot, size)
             if kind != "output" or mask is not None:  # masked lanes keep the output's value
                 cl.enqueue_copy(queue, buf, arr, is_blocking=False)
             if kind in ("buffer", "output"):
@@ -211,13 +216,13 @@ class ClKernel(Kernel):
         if mask is not None:
             m = np.ascontiguousarray(mask)
             keep.append(m)
-            mbuf = self._buffer_for(-1, m.nbytes)
+            mbuf = self._buffer_for(-1, pad)
             cl.enqueue_copy(queue, mbuf, m, is_blocking=False)
         else:
             mbuf = self._buffer_for(-1, 1)
         kargs += [mbuf, np.int32(mask is not None)]
         self._kernel.set_args(*kargs)
-        groups = -(-n // LOCAL_SIZE)
+        groups = -(-items // LOCAL_SIZE)
         cl.enqueue_nd_range_kernel(queue, self._kernel, (groups * LOCAL_SIZE,), (LOCAL_SIZE,))
         for host, arr, buf in back:
             cl.enqueue_copy(queue, arr, buf, is_blocking=True)

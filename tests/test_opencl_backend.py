@@ -1,8 +1,8 @@
 """Target ``opencl`` (OpenCL C on PoCL, through pyopencl): the differential corpus against
-the interpreter; every stdlib BSDF module's kernels (eval, pdf, sample and the library
-functions) against the avx2 LLVM build on random inputs; a user plugin kernel
-(bench/ggx_kernel.rdsl) through the CPU kernels' call interface (arrays, broadcast
-scalars, masks, ``out=``, struct results); the command line; bad input.
+the interpreter at widths 1, 8 and 16; every stdlib BSDF module's kernels (eval, pdf,
+sample and the library functions) against the avx2 LLVM build on random inputs; a user
+plugin kernel (bench/ggx_kernel.rdsl) through the CPU kernels' call interface (arrays,
+broadcast scalars, masks, ``out=``, struct results); the command line; bad input.
 
 Tolerance: none.  The program is built with exactly rounded division and sqrt and with
 FP_CONTRACT OFF, and the IR has no other transcendental, so the OpenCL results must equal
@@ -44,9 +44,13 @@ GGX = ROOT / "bench" / "ggx_kernel.rdsl"
 REF = "avx2" if host_supports(get_target("avx2")) else "scalar"
 
 
+WIDTHS = (1, 8, 16)
+
+
 @pytest.fixture(scope="module")
 def cl_compiled():
-    return {(f.stem, "opencl"): rdsl.jit(f, target="opencl") for f in CORPUS.glob("*.rdsl")}
+    return {(f.stem, f"opencl{w}"): rdsl.jit(f, target="opencl", width=w)
+            for w in WIDTHS for f in CORPUS.glob("*.rdsl")}
 
 
 @pytest.mark.parametrize("case", sorted(CASES), ids=lambda c: f"{c[0]}.{c[1]}")
@@ -59,7 +63,7 @@ def test_stdlib_bsdf_matches_llvm(path: Path):
     """Every kernel of the module, through the flat arguments of its manifest."""
     mod = rdsl.jit(path, target="opencl")
     ref = rdsl.jit(path, target=REF)
-    assert mod.manifest["backend"] == "opencl" and mod.width == 1
+    assert mod.manifest["backend"] == "opencl" and mod.width == get_target("host").width
     rng = np.random.default_rng(5)
     n = 99 if path.stem in ("roughplastic", "common") else 999
     nonzero = 0
@@ -83,11 +87,12 @@ def _ggx_inputs(n: int, seed: int = 1):
     return wi, rng.random(n, dtype=np.float32), rng.random((n, 2), dtype=np.float32)
 
 
-def test_user_kernel_call_interface():
+@pytest.mark.parametrize("width", WIDTHS)
+def test_user_kernel_call_interface(width: int):
     """The GGX kernel called as on the CPU: fresh results, a scalar broadcast to every
     element, strided inputs, a mask (masked lanes keep ``out``'s values), and a second
     call over fewer elements reusing the device buffers."""
-    cl_k = rdsl.jit(GGX, target="opencl")["ggx_eval_sample"]
+    cl_k = rdsl.jit(GGX, target="opencl", width=width)["ggx_eval_sample"]
     cpu_k = rdsl.jit(GGX, target=REF)["ggx_eval_sample"]
     wi, u1, u2 = _ggx_inputs(1001)
     want = cpu_k(wi, u1, u2, 0.3)
@@ -131,12 +136,12 @@ def test_cli_writes_and_loads(tmp_path: Path):
     text = (tmp_path / "shade.cl").read_text()
     assert "__kernel void rdsl_shade(" in text
     mod = rdsl.load(tmp_path / "shade.cl")
-    assert (mod.target, mod.width) == ("opencl", 1)
+    assert mod.target == "opencl"
     a = np.linspace(-2, 2, 11, dtype=np.float32)
     got = mod["shade"](a, a[::-1].copy(), np.full(11, 3, np.int32), np.ones(11, bool))
     assert np.array_equal(got, a * a[::-1] + np.float32(3))
-    assert_user_error(rdsl_cli("compile", str(src), "--target", "opencl", "--width", "4"),
-                      "target `opencl` has SIMD width 1")
+    assert_user_error(rdsl_cli("compile", str(src), "--target", "opencl", "--width", "3"),
+                      "unsupported SIMD width 3 for target `opencl`")
     assert_user_error(rdsl_cli("compile", str(src), "--target", "opencl", "--emit", "asm"),
                       "needs an LLVM target")
 

@@ -222,8 +222,14 @@ class CLikePrinter:
         if t.name != "i32":
             return f"({op}{a})" if b is None else f"({a} {op} {b})"
         u = self.ctype(ir.ScalarType("u32", lanes=t.lanes))
-        r = f"({op}({u}){a})" if b is None else f"(({u}){a} {op} ({u}){b})"
-        return f"(({self.ctype(t)}){r})"
+        ua = self.reinterpret(u, a)
+        r = f"({op}{ua})" if b is None else f"({ua} {op} {self.reinterpret(u, b)})"
+        return self.reinterpret(self.ctype(t), r)
+
+    def reinterpret(self, ctype: str, expr: str) -> str:
+        """``expr`` as C type ``ctype`` of the same size, bit for bit (a C cast: vector
+        extensions cast vectors bitwise, and i32 <-> u32 wraps)."""
+        return f"(({ctype}){expr})"
 
     def render_arith(self, ins: ir.Instr) -> str:
         a, b = self.operands(ins)
