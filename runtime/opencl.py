@@ -54,7 +54,9 @@ def opencl_context() -> tuple[Any, Any, str]:
         raise OpenCLUnavailable("target opencl found no OpenCL platform: install one, e.g. "
                                 "PoCL for the CPU (Debian: apt-get install pocl-opencl-icd)")
     ctx = cl.Context([devices[0]])
-    _CONTEXT.append((ctx, cl.CommandQueue(ctx), devices[0].name.strip()))
+    # profiling: each call records its kernel's own time (ClKernel.last_device_seconds)
+    queue = cl.CommandQueue(ctx, properties=cl.command_queue_properties.PROFILING_ENABLE)
+    _CONTEXT.append((ctx, queue, devices[0].name.strip()))
     return _CONTEXT[0]
 
 
@@ -125,6 +127,7 @@ class ClKernel(Kernel):
         self._cl = cl
         self._kernel = getattr(program, info["symbol"])
         self._device: dict[int, Any] = {}  # argument slot (or -1: the mask) -> cl.Buffer
+        self.last_device_seconds = 0.0  # the last call's kernel alone, without copies
 
     def _bind_native(self, lib: Any) -> None:
         pass  # no C entry points: the program's kernel is looked up in __init__
@@ -188,8 +191,7 @@ class ClKernel(Kernel):
         items = -(-n // self.width)  # work-items: W elements each
         pad = items * self.width
         kargs: list[Any] = [np.int64(n)]
-        keep: list[np.ndarray] = []
-        back: list[tuple[np.ndarray, np.ndarray, Any]] = []  # host array, staging, device
+        back: list[tuple[np.ndarray, Any]] = []  # host array, device buffer
         out_iter = iter(outs)
         for slot, a in enumerate(self.args):
             v, kind, dt = vals[slot], a["kind"], a["dtype"]
@@ -198,37 +200,44 @@ class ClKernel(Kernel):
                 continue
             broadcast = kind == "varying" and not isinstance(v, np.ndarray)
             if kind == "varying":  # one element (read with stride 0) for a scalar
-                arr = np.ascontiguousarray(_leaf_memory(v, dt)[:1 if broadcast else None])
-            else:  # a buffer is updated in place; an output staged contiguously
+                host = _leaf_memory(v, dt)[:1 if broadcast else None]
+            else:  # a buffer is updated in place; an output written back
                 host = v if kind == "buffer" else next(out_iter)
-                arr = np.ascontiguousarray(host)
+                back.append((host, None))
             # the arrays a work-item reads W at a time hold n rounded up to W elements
-            size = arr.nbytes if kind == "buffer" or broadcast else pad * arr.itemsize
+            size = host.nbytes if kind == "buffer" or broadcast else pad * host.itemsize
             buf = self._buffer_for(slot, size)
             if kind != "output" or mask is not None:  # masked lanes keep the output's value
-                cl.enqueue_copy(queue, buf, arr, is_blocking=False)
-            if kind in ("buffer", "output"):
-                back.append((host, arr, buf))
-            keep.append(arr)
+                self._write(queue, buf, host)
+            if kind != "varying":
+                back[-1] = (host, buf)
             kargs.append(buf)
             if kind == "varying":
                 kargs.append(np.int32(0 if broadcast else 1))
+        mbuf = self._buffer_for(-1, pad if mask is not None else 1)
         if mask is not None:
-            m = np.ascontiguousarray(mask)
-            keep.append(m)
-            mbuf = self._buffer_for(-1, pad)
-            cl.enqueue_copy(queue, mbuf, m, is_blocking=False)
-        else:
-            mbuf = self._buffer_for(-1, 1)
+            self._write(queue, mbuf, mask)
         kargs += [mbuf, np.int32(mask is not None)]
         self._kernel.set_args(*kargs)
         groups = -(-items // LOCAL_SIZE)
-        cl.enqueue_nd_range_kernel(queue, self._kernel, (groups * LOCAL_SIZE,), (LOCAL_SIZE,))
-        for host, arr, buf in back:
-            cl.enqueue_copy(queue, arr, buf, is_blocking=True)
-            if arr is not host:
-                host[...] = arr
+        event = cl.enqueue_nd_range_kernel(queue, self._kernel, (groups * LOCAL_SIZE,),
+                                           (LOCAL_SIZE,))
+        for host, buf in back:
+            mapped, _ = cl.enqueue_map_buffer(queue, buf, cl.map_flags.READ, 0, host.shape,
+                                              host.dtype, is_blocking=True)
+            with mapped.base:
+                host[...] = mapped
         queue.finish()
+        self.last_device_seconds = (event.profile.end - event.profile.start) * 1e-9
+
+    def _write(self, queue: Any, buf: Any, host: np.ndarray) -> None:
+        """Copy 1-D ``host`` (any stride) to the start of ``buf``: through a mapping, one
+        strided pass (no staging copy; on a CPU device the mapping is the buffer itself)."""
+        cl = self._cl
+        mapped, _ = cl.enqueue_map_buffer(queue, buf, cl.map_flags.WRITE_INVALIDATE_REGION, 0,
+                                          host.shape, host.dtype, is_blocking=True)
+        with mapped.base:
+            mapped[...] = host
 
 
 __all__ = ["ClKernel", "ClModule", "OpenCLUnavailable", "load_opencl", "opencl_context"]
