@@ -103,6 +103,11 @@ class ClModule(Module):
     def _make_kernel(self, info: dict[str, Any], lib: Any) -> Kernel:
         return ClKernel(self, info, self.program)
 
+    def resident(self, array: np.ndarray) -> DeviceBuffer:
+        """A copy of ``array`` on the device, for the kernels' buffer parameters (read and
+        written there, without copies; ``get()`` reads it back)."""
+        return DeviceBuffer(array)
+
     @property
     def device(self) -> str:
         """The name of the OpenCL device the kernels run on."""
@@ -114,6 +119,33 @@ class ClModule(Module):
 
     def bind_scene(self, scene: Any) -> None:
         raise ValueError("this library traces no rays, so it takes no scene")
+
+
+class DeviceBuffer:
+    """A numpy array's copy in device memory.  Passed for a kernel's buffer parameter it is
+    used in place: no copy to or from the host (the renderer keeps the scene's buffers and
+    the film there); :meth:`get` returns its contents as a new array."""
+
+    def __init__(self, array: np.ndarray) -> None:
+        import pyopencl as cl
+
+        ctx = opencl_context()[0]
+        host = np.ascontiguousarray(array)
+        self.shape, self.dtype = host.shape, host.dtype
+        flags = cl.mem_flags.READ_WRITE
+        if host.nbytes:
+            self.buffer = cl.Buffer(ctx, flags | cl.mem_flags.COPY_HOST_PTR, hostbuf=host)
+        else:  # OpenCL has no empty buffers
+            self.buffer = cl.Buffer(ctx, flags, 16)
+
+    def get(self) -> np.ndarray:
+        """The buffer's contents, read back from the device."""
+        import pyopencl as cl
+
+        out = np.empty(self.shape, self.dtype)
+        if out.nbytes:
+            cl.enqueue_copy(opencl_context()[1], out, self.buffer, is_blocking=True)
+        return out
 
 
 class ClKernel(Kernel):
@@ -131,6 +163,15 @@ class ClKernel(Kernel):
 
     def _bind_native(self, lib: Any) -> None:
         pass  # no C entry points: the program's kernel is looked up in __init__
+
+    def _buffer(self, p: dict[str, Any], value: Any) -> Any:
+        if isinstance(value, DeviceBuffer):
+            want = _C_DTYPES[p["type"]["dtype"]]
+            if value.dtype != want:
+                raise self._err(f"buffer parameter `{p['name']}` expects {want.name}, got a "
+                                f"device buffer of {value.dtype}")
+            return value
+        return super()._buffer(p, value)
 
     # -- calling -------------------------------------------------------------------------
     def __call__(self, *args: Any, mask: Any = None, threads: int | None = None,
@@ -184,7 +225,8 @@ class ClKernel(Kernel):
                outs: list[np.ndarray]) -> None:
         """Run over ``n`` elements.  ``vals``: per argument of the manifest, an array or a
         scalar for a varying input (a scalar is every element's value), the value of a
-        uniform, the numpy array of a buffer (updated in place); ``outs``: the output
+        uniform, the numpy array of a buffer (updated in place) or a
+        :class:`DeviceBuffer`; ``outs``: the output
         arrays in order (1-D, any stride; bools as uint8)."""
         cl = self._cl
         queue = opencl_context()[1]
@@ -197,6 +239,9 @@ class ClKernel(Kernel):
             v, kind, dt = vals[slot], a["kind"], a["dtype"]
             if kind == "uniform":
                 kargs.append(_UNIFORM_NP[dt](v.value if hasattr(v, "value") else v))
+                continue
+            if isinstance(v, DeviceBuffer):  # already on the device: used in place
+                kargs.append(v.buffer)
                 continue
             broadcast = kind == "varying" and not isinstance(v, np.ndarray)
             if kind == "varying":  # one element (read with stride 0) for a scalar
@@ -240,4 +285,5 @@ class ClKernel(Kernel):
             mapped[...] = host
 
 
-__all__ = ["ClKernel", "ClModule", "OpenCLUnavailable", "load_opencl", "opencl_context"]
+__all__ = ["ClKernel", "ClModule", "DeviceBuffer", "OpenCLUnavailable", "load_opencl",
+           "opencl_context"]

@@ -399,10 +399,14 @@ class CLikePrinter:
 
     def render_ray(self, ins: ir.Instr) -> None:
         what = "trace" if ins.op is ir.Op.INTERSECT else "occluded"
-        raise CompileError(f"the {self.target_name} backend cannot trace rays: `{what}` (IR "
+        raise NoRayTracer(f"the {self.target_name} backend cannot trace rays: `{what}` (IR "
                            f"`{ins.op.value}`) needs Embree, which only the LLVM CPU targets "
                            "link (a BVH written in rdsl is not there yet); compile this "
                            "kernel for scalar, sse4, avx2 or avx512", ins.loc)
+
+
+class NoRayTracer(CompileError):
+    """A kernel traces rays on a target that has no ray tracer (no Embree; no BVH in rdsl)."""
 
 
 def saturation(dst: ir.ScalarType) -> tuple[str, str, str, str]:
