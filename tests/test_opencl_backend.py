@@ -220,4 +220,4 @@ def test_render_tracing_rays_is_one_clear_line(tmp_path: Path):
                  "-o", str(tmp_path / "x.exr"))
     assert r.returncode == 1 and "Traceback" not in r.stderr
     assert r.stderr.strip().count("\n") == 0, r.stderr
-    assert "has no ray tracer yet" in r.stderr and "bvh.rdsl" in r.stderr
+    assert "the scene traces rays" in r.stderr and "BVH written in rdsl" in r.stderr

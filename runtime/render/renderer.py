@@ -301,11 +301,7 @@ class Scene:
             mod = jit(src, build=self.build, scene=scene, search_paths=self.search_paths,
                       filename=filename)
         except NoRayTracer:  # one line: what is missing, not the integrator's source
-            t = self.build.target.name
-            raise CompileError(f"{self.path.name}: the scene traces rays, and target `{t}` "
-                               "has no ray tracer yet (it needs the BVH written in rdsl, "
-                               "stdlib/render/bvh.rdsl, which this build lacks); render "
-                               "with an LLVM target (--target host)") from None
+            raise CompileError(_no_ray_tracer(self.path, self.build.target.name)) from None
         if not self.specialize:  # and so do the tables the plugins compute per scene
             self.prm = fill_tables(mod, self.scene_spec, self.prm, src, filename,
                                    self.search_paths)
@@ -467,6 +463,18 @@ class Scene:
         if getattr(self, "_resident", (None,))[0] is not mod:
             self._resident = (mod, [mod.resident(b) for b in self.buffers.args()])
         return self._resident[1]
+
+
+def _no_ray_tracer(path: Path, target: str) -> str:
+    """What a scene that traces rays lacks on a target without Embree."""
+    from ...compiler.sources import STDLIB
+
+    if (STDLIB / "render" / "bvh.rdsl").is_file():
+        return (f"{path.name}: the scene traces rays, which target `{target}` does with the "
+                "BVH written in rdsl only: render with --accel bvh")
+    return (f"{path.name}: the scene traces rays, and target `{target}` has no ray tracer "
+            "yet (it needs the BVH written in rdsl, stdlib/render/bvh.rdsl, which this build "
+            "lacks); render with an LLVM target (--target host)")
 
 
 def _film_samples(out: dict[str, Any], ns: int) -> np.ndarray:
