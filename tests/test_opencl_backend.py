@@ -221,3 +221,20 @@ def test_render_tracing_rays_is_one_clear_line(tmp_path: Path):
     assert r.returncode == 1 and "Traceback" not in r.stderr
     assert r.stderr.strip().count("\n") == 0, r.stderr
     assert "the scene traces rays" in r.stderr and "BVH written in rdsl" in r.stderr
+
+
+@pytest.mark.skipif(not (ROOT / "stdlib" / "render" / "bvh.rdsl").is_file(),
+                    reason="needs the BVH written in rdsl (stdlib/render/bvh.rdsl)")
+def test_cornell_box_with_rdsl_bvh():
+    """The Cornell box traced by the rdsl BVH on OpenCL: the image of the same BVH on the
+    LLVM target bit for bit (the same IR, and both targets round alike), and Embree's
+    within float noise (a hit's t and barycentrics differ in the last bits)."""
+    from _scenes import CBOX
+
+    imgs = {}
+    for target, accel in (("opencl", "bvh"), (REF, "bvh"), (REF, "embree")):
+        s = rdsl.load_scene(CBOX, target=target, accel=accel, res=32, spp=4)
+        imgs[target, accel] = s.render()
+    assert np.array_equal(imgs["opencl", "bvh"], imgs[REF, "bvh"])
+    assert np.abs(imgs["opencl", "bvh"] - imgs[REF, "embree"]).max() < 1e-3
+    assert imgs[REF, "embree"].mean() > 0.05
