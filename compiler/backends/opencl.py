@@ -33,8 +33,8 @@ from typing import ClassVar
 from .. import ir
 from ..diagnostics import CompileError
 from ..targets import Target
-from .base import Backend, CArg, c_arg_names, c_args, c_name, kernels, split_params
-from .c import SimdC
+from .base import CArg, c_arg_names, c_name, entry_args, kernels
+from .c import CBackend, SimdC
 from .c_like import table_decls
 
 #: options every program is built with (the IR's float semantics: exact division and sqrt)
@@ -64,16 +64,12 @@ typedef uchar uint8_t;
 """
 
 
-class OpenCLBackend(Backend):
-    """OpenCL C, built and run by the OpenCL runtime (``rdsl.runtime.opencl``)."""
+class OpenCLBackend(CBackend):
+    """OpenCL C, built and run by the OpenCL runtime (``rdsl.runtime.opencl``): the SIMD C
+    backend's capabilities and widths."""
 
     name = "opencl"
     emits = ("cl",)
-    supports_gather = True
-    supports_scatter = True
-    supports_float_rem = True
-    max_width = 16
-    widths = (1, 4, 8, 16)
 
 
 class OpenCLPrinter(SimdC):
@@ -145,13 +141,7 @@ def cl_params(args: list[CArg]) -> list[tuple[str, str]]:
 # long: one straight sequence (arguments, lanes, inputs, body, outputs) per kernel
 def _kernel(fn: ir.Function, W: int) -> tuple[list[str], dict[str, list[float]]]:
     """The ``__kernel`` of one exported function, and the tables its body reads."""
-    params, mask_param = split_params(fn)
-    if mask_param is None:
-        raise CompileError(f"kernel `{fn.name}` has no execution mask parameter "
-                           "(run vectorize first)", fn.loc)
-    args = c_args(fn)
-    names = ["arg_" + n for n in c_arg_names(args)]
-    n_in = sum(a.kind != "output" for a in args)
+    params, mask_param, args, names, n_in = entry_args(fn)
     proto = ",\n    ".join(f"{t} {n}" for t, n in [("const long", "n"), *cl_params(args)])
     out = [f"__kernel void rdsl_{c_name(fn.name)}(\n    {proto})", "{"]
     p = OpenCLPrinter(W, {})
