@@ -21,8 +21,8 @@ _VARIANTS_HELP = ", ".join(VARIANTS) + " (default: rgb)"
 _AD_HELP = ("differentiate: 'forward' gives each kernel with Float arguments a tangent "
             "argument per argument and a tangent result per Float result (docs/ad.md)")
 _ARCH_HELP = "GPU architecture of target ptx: sm_70 (default), sm_80 or sm_90"
-_WIDTH_HELP = ("SIMD width of target c: 1, 4, 8 or 16 (default: the host's widest); the "
-               "LLVM targets have their own")
+_WIDTH_HELP = ("SIMD width of target c, or the lanes per work-item of target opencl: 1, 4, "
+               "8 or 16 (default: the host's widest); the LLVM targets have their own")
 
 
 def add_commands(sub: argparse._SubParsersAction) -> dict[str, Command]:
@@ -45,7 +45,8 @@ def add_commands(sub: argparse._SubParsersAction) -> dict[str, Command]:
     k.add_argument("file")
     k.add_argument("--target", default="host",
                    help="scalar, sse4, avx2, avx512, host (default), c (SIMD C source "
-                        "compiled by the machine's cc), or ptx (CUDA PTX: STEM.ptx)")
+                        "compiled by the machine's cc), opencl (STEM.cl: OpenCL C, built "
+                        "by the OpenCL driver when loaded), or ptx (CUDA PTX: STEM.ptx)")
     k.add_argument("--width", type=int, default=None, help=_WIDTH_HELP)
     k.add_argument("--arch", default=None, help=_ARCH_HELP)
     k.add_argument("--variant", default="rgb", help=_VARIANTS_HELP)
@@ -122,9 +123,11 @@ def _compile(args: argparse.Namespace) -> int:
     if tgt.backend == "ptx" and args.emit == "obj":
         raise CompileError("--emit obj needs a CPU target; target ptx writes PTX text "
                            "(--emit lib or asm)")
-    if (args.emit == "c") != (tgt.backend == "c") and args.emit != "lib":
+    llvm_like = tgt.backend in ("llvm", "ptx")  # LLVM IR and assembly exist for these
+    if args.emit != "lib" and not (tgt.backend == "c" if args.emit == "c" else llvm_like):
+        other = "c or lib" if tgt.backend == "c" else "lib"
         raise CompileError(f"--emit {args.emit} needs " + ("--target c" if args.emit == "c"
-                           else f"an LLVM target, not `{tgt.name}` (use --emit c or lib)"))
+                           else f"an LLVM target, not `{tgt.name}` (use --emit {other})"))
     src = _require_file(args.file).resolve()
     module, _ = compile_kernels(src, build)
     if args.emit in ("llvm", "asm", "obj"):
@@ -140,9 +143,9 @@ def _compile(args: argparse.Namespace) -> int:
         print(f"wrote {out}")
         return 0
     stem = Path(args.output) if args.output else Path(src.stem)
-    if stem.suffix in (".so", ".h", ".json", ".c", ".ptx"):
+    if stem.suffix in (".so", ".h", ".json", ".c", ".cl", ".ptx"):
         stem = stem.with_suffix("")
-    for ext in (".so", ".h", ".json", ".c", ".ptx"):
+    for ext in (".so", ".h", ".json", ".c", ".cl", ".ptx"):
         _refuse_input(stem.with_suffix(ext) if stem.suffix == "" else
                       Path(str(stem) + ext), src)
     out_dir = stem.parent if str(stem.parent) else Path(".")
