@@ -369,6 +369,9 @@ class Scene:
         sky = ("none, the miss branch folds away" if env < 0
                else f"emitter {env} ({kinds[int(self.buffers.lights.EK[4 * env])]})")
         lines = [f"textures: {len(scene.textures)} ({plugins})", f"environment: {sky}"]
+        if self.bvh is not None:
+            lines.append(f"accel: bvh, {self.bvh.nodes} nodes over {len(self.bvh.prims)} "
+                         f"primitives, built in {self.bvh.build_seconds:.2f} s")
         if self.specialize:
             folded = f"sampling code for {lacks} folded away"
             return [f"parameters: {len(values)} values of {n} instance(s) folded as constants",
