@@ -59,7 +59,7 @@ SCENE = """<scene version="3.0.0">
     <bsdf type="diffuse"><rgb name="reflectance" value="0.6, 0.5, 0.4"/></bsdf></shape>
   <shape type="sphere"><point name="center" x="-0.4" y="0.2" z="0.45"/>
     <float name="radius" value="0.35"/>
-    <bsdf type="roughconductor"><float name="alpha" value="0.2"/></bsdf></shape>
+    <bsdf type="conductor"/></shape>
   <shape type="sphere"><transform name="to_world"><scale value="0.3"/>
     <translate x="0.5" y="-0.3" z="0.5"/></transform>
     <bsdf type="dielectric"/></shape>
@@ -76,9 +76,11 @@ SCENE = """<scene version="3.0.0">
 """
 
 
-@pytest.fixture(scope="module")
-def query():
-    return rdsl.jit(QUERY_SRC).query
+@pytest.fixture(scope="module", params=["host", "scalar"])
+def query(request):
+    """The traversal as a packet of the host's width (nodes entered when any lane's ray
+    meets the box) and ray by ray."""
+    return rdsl.jit(QUERY_SRC, target=request.param).query
 
 
 @pytest.fixture(scope="module")
