@@ -240,3 +240,14 @@ def test_mesh_spheres_disks_render_the_same_with_the_bvh(mixed_scene):
     assert scene.bvh is not None and not scene.compile().traces_rays  # no Embree in it
     img = _assert_same_image(mixed_scene)
     assert img.mean() > 0.02
+
+
+@pytest.mark.skipif(shutil.which("cc") is None, reason="no C compiler (cc) on PATH")
+def test_c_target_traces_through_the_bvh():
+    """The traversal is ordinary stdlib code: the C backend compiles it too (no Embree in
+    the C kernel), and its image is the LLVM one with Embree to float rounding."""
+    scene = rdsl.load_scene(CBOX, target="c", accel="bvh", res=24)
+    assert not scene.compile().traces_rays
+    got = scene.render(spp=2, seed=3)
+    want = rdsl.load_scene(CBOX, res=24).render(spp=2, seed=3)
+    np.testing.assert_allclose(got, want, atol=1e-4 * want.max())
