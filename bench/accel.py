@@ -4,7 +4,8 @@ run it by hand.
 
     python bench/accel.py [--spp 16] [--repeat 3] [--res 128] [--leaf-size 4]
 
-Scenes: the Cornell box, a scene of an OBJ mesh, spheres and disks (tests/test_bvh.py's),
+Also the closest-hit rate of each on a million random rays, one thread.  Scenes: the
+Cornell box, a scene of an OBJ mesh, spheres and disks (tests/test_bvh.py's),
 and a generated height-field mesh of about 100k triangles.  The two renders of a scene
 alternate (``--repeat`` times) and each time is the median, so the machine's load affects
 both alike; kernels are compiled (or loaded from the cache) before timing.
@@ -71,6 +72,39 @@ def scenes(folder: Path, res: int) -> dict[str, tuple[Path, dict]]:
             f"terrain {ntri // 1000}k tris": (folder / "terrain.xml", {})}
 
 
+RAY_SRC = {
+    "bvh": """import render.bvh;
+fn q(o: Vec3, d: Vec3, BV: [Float], BI: [Int], P: [Float], G: [Int]) -> Float {
+    return bvh_trace(Ray { o: o, d: d, tmax: infinity() }, BV, BI, P, G).t;
+}""",
+    "embree": """fn q(o: Vec3, d: Vec3) -> Float {
+    return trace(Ray { o: o, d: d, tmax: infinity() }).t;
+}"""}
+
+
+def ray_rates(bufs, n: int, repeat: int) -> tuple[float, float]:
+    """Closest hits per second (millions, one thread) of Embree and of the BVH, for ``n``
+    random rays from points in the scene's box (incoherent, as after a diffuse bounce)."""
+    bvh, emb = rdsl.jit(RAY_SRC["bvh"]).q, rdsl.jit(RAY_SRC["embree"])
+    scene = EmbreeScene(bufs.meshes, quality="low", mesh_quality="high")
+    emb.bind_scene(scene)
+    rng = np.random.default_rng(0)
+    p = bufs.P[:3 * (len(bufs.P) // 3)].reshape(-1, 3)
+    lo, hi = p.min(axis=0), p.max(axis=0)
+    o = (lo + (hi - lo) * (0.05 + 0.9 * rng.random((n, 3)))).astype(np.float32)
+    d = rng.normal(size=(n, 3)).astype(np.float32)
+    runs = {"embree": lambda: emb.q(o, d, threads=1),
+            "bvh": lambda: bvh(o, d, bufs.BV, bufs.BI, bufs.P, bufs.G, threads=1)}
+    times: dict[str, list[float]] = {"embree": [], "bvh": []}
+    for _ in range(repeat):
+        for name, run in runs.items():
+            t0 = time.perf_counter()
+            run()
+            times[name].append(time.perf_counter() - t0)
+    scene.close()
+    return tuple(n / statistics.median(times[k]) / 1e6 for k in ("embree", "bvh"))
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--spp", type=int, default=16)
@@ -90,7 +124,7 @@ def main() -> None:
             EmbreeScene(bufs.meshes, quality="low", mesh_quality="high").close()
             embree_build = time.perf_counter() - t0
             cpu = time.process_time()
-            _, _, bvh = scene_bvh(bufs, leaf_size=args.leaf_size)
+            bufs.BV, bufs.BI, bvh = scene_bvh(bufs, leaf_size=args.leaf_size)  # renders use it
             cpu = time.process_time() - cpu  # on a loaded machine, what the build costs
             times: dict[str, list[float]] = {"embree": [], "bvh": []}
             for _ in range(args.repeat):
@@ -99,17 +133,19 @@ def main() -> None:
                     scene.render(spp=args.spp, seed=0)
                     times[accel].append(time.perf_counter() - t0)
             e, b = (statistics.median(times[a]) for a in ("embree", "bvh"))
-            rows.append((name, len(bvh.prims), e, b, b / e, embree_build, bvh.build_seconds,
-                         cpu, bvh.nodes))
+            rays = ray_rates(bufs, 1 << 20, args.repeat)
+            rows.append((name, len(bvh.prims), e, b, b / e, *rays, embree_build,
+                         bvh.build_seconds, cpu, bvh.nodes))
     print(f"{args.res}x{args.res}, {args.spp} spp, median of {args.repeat} alternated renders; "
-          f"BVH leaf size {args.leaf_size}")
-    head = ("scene", "prims", "embree s", "bvh s", "bvh/embree", "embree build s",
-            "bvh build s", "bvh build cpu s", "bvh nodes")
+          f"BVH leaf size {args.leaf_size}; Mrays/s: closest hits of 1M random rays from "
+          "inside the scene's box, one thread")
+    head = ("scene", "prims", "embree s", "bvh s", "bvh/embree", "embree Mrays/s",
+            "bvh Mrays/s", "embree build s", "bvh build s", "bvh build cpu s", "bvh nodes")
     print("| " + " | ".join(head) + " |")
     print("|" + "---|" * len(head))
-    for name, prims, e, b, r, eb, bb, cpu, nodes in rows:
-        print(f"| {name} | {prims} | {e:.3f} | {b:.3f} | {r:.2f}x | {eb:.3f} | {bb:.3f} | "
-              f"{cpu:.3f} | {nodes} |")
+    for name, prims, e, b, r, re, rb, eb, bb, cpu, nodes in rows:
+        print(f"| {name} | {prims} | {e:.3f} | {b:.3f} | {r:.2f}x | {re:.2f} | {rb:.2f} | "
+              f"{eb:.3f} | {bb:.3f} | {cpu:.3f} | {nodes} |")
 
 
 if __name__ == "__main__":
