@@ -221,8 +221,10 @@ class Scene:
     tangents: np.ndarray | None = None  # its dPRM
 
     def __init__(self, path: str | Path, build: Build, specialize: bool = True,
-                 triangulate: bool = False, plugins: Any = (), accel: str = "embree",
+                 triangulate: bool = False, plugins: Any = (), accel: str | None = None,
                  **defaults: Any) -> None:
+        if accel is None:  # Embree runs on the CPU; other devices trace through the rdsl BVH
+            accel = "embree" if build.target.backend in ("llvm", "c") else "bvh"
         if accel not in ACCELS:
             raise CompileError(f"unknown accel `{accel}` (valid: {', '.join(ACCELS)})")
         self.path = Path(path)
@@ -531,15 +533,16 @@ def _film_samples(out: dict[str, Any], ns: int) -> np.ndarray:
 def load_scene(path: str | Path, variant: str | ColorModel = "rgb",
                target: str | Target = "host", specialize: bool = True,
                triangulate: bool = False, *, build: Build | None = None,
-               plugins: Any = (), accel: str = "embree", **defaults: Any) -> Scene:
+               plugins: Any = (), accel: str | None = None, **defaults: Any) -> Scene:
     """Load a Mitsuba 3 XML scene for rendering (``-D name=value`` as keyword args).
     ``specialize=False`` gives the generic build (parameters read at run time).  ``build``,
     when given, replaces ``variant`` and ``target``; a bad name of either is a diagnostic
     before the scene is read.  ``plugins``: folders (or ``.rdsl`` files) searched for the
     scene's BSDF, texture and emitter plugins after the scene's own folder and before
     ``$RDSL_PLUGIN_PATH``, the registered plugins and the stdlib (docs/plugins.md).
-    ``accel``: "embree" (default) traces rays with Embree, "bvh" with the BVH written in
-    rdsl (stdlib/render/bvh.rdsl, built by runtime/render/bvh.py)."""
+    ``accel``: "embree" (the default on CPU targets) traces rays with Embree, "bvh" (the
+    default on opencl, spirv and ptx) with the BVH written in rdsl (stdlib/render/bvh.rdsl,
+    built by runtime/render/bvh.py)."""
     build = build or Build.of(target, variant)
     return Scene(path, build, specialize=specialize, triangulate=triangulate,
                  plugins=plugins, accel=accel, **defaults)
