@@ -217,10 +217,11 @@ def test_render_without_rays_matches_llvm(tmp_path: Path):
 
 
 def test_render_tracing_rays_is_one_clear_line(tmp_path: Path):
+    """Embree asked for on OpenCL (the default there is the rdsl BVH): one clear line."""
     from _scenes import CBOX
 
     r = rdsl_cli("render", str(CBOX), "-D", "res=8", "-D", "spp=1", "--target", "opencl",
-                 "-o", str(tmp_path / "x.exr"))
+                 "--accel", "embree", "-o", str(tmp_path / "x.exr"))
     assert r.returncode == 1 and "Traceback" not in r.stderr
     assert r.stderr.strip().count("\n") == 0, r.stderr
     assert "the scene traces rays" in r.stderr and "BVH written in rdsl" in r.stderr

@@ -111,7 +111,7 @@ def _cbox(accel: str | None = None, path: Path = CBOX, variant: str = "rgb"):
 
 
 def test_render_kernel_with_embree_queries_is_refused():
-    module = _cbox().kernel_ir()
+    module = _cbox(accel="embree").kernel_ir()
     with pytest.raises(CompileError) as e:
         emit_ptx(module, ptx_target("sm_80"))
     msg = str(e.value)
