@@ -28,7 +28,7 @@ class Target:
     features: str
     requires: tuple[str, ...] = ()
     vector_bits: int = 128
-    backend: str = "llvm"  # which code generator: "llvm" or "c"
+    backend: str = "llvm"  # which code generator: "llvm", "c" or "spirv"
 
     @property
     def triple(self) -> str:
@@ -87,7 +87,7 @@ def host_features() -> frozenset[str]:
 def host_supports(target: Target | str) -> bool:
     """True if code compiled for ``target`` can run on this machine."""
     t = get_target(target) if isinstance(target, str) else target
-    if t.backend == "c":  # compiled by this machine's cc, for this machine
+    if t.backend in ("c", "spirv"):  # cc for this machine; a Vulkan device (checked at run)
         return True
     feats = host_features()
     if not feats:
@@ -116,20 +116,30 @@ def c_target(width: int | None = None) -> Target:
     return Target("c", width, "native", "", (), 32 * width, backend="c")
 
 
+def spirv_target(width: int | None = None) -> Target:
+    """The SPIR-V target (GLSL compute shaders on Vulkan): one element per invocation."""
+    if width not in (None, 1):
+        raise CompileError(f"target `spirv` runs one element per shader invocation: its "
+                           f"width is 1, not {width}")
+    return Target("spirv", 1, "vulkan", "", (), 32, backend="spirv")
+
+
 def get_target(name: str | Target, width: int | None = None) -> Target:
     """Look a target up by name (``scalar``, ``sse4``, ``avx2``, ``avx512``, ``host`` or
-    ``c``).  ``width`` picks the width of ``c``; an LLVM target has its own, which a
+    ``c``, ``spirv``).  ``width`` picks the width of ``c``; an LLVM target has its own, which a
     different ``width`` contradicts (a diagnostic)."""
     if isinstance(name, Target):
         t = name
     elif name == "c":
         return c_target(width)
+    elif name == "spirv":
+        return spirv_target(width)
     elif name == "host":
         t = host_target()
     else:
         found = TARGETS.get(name)
         if found is None:
-            valid = ", ".join([*TARGETS, "host", "c"])
+            valid = ", ".join([*TARGETS, "host", "c", "spirv"])
             raise CompileError(f"unknown target `{name}` (valid targets: {valid})")
         t = found
     if width is not None and width != t.width:
