@@ -144,7 +144,7 @@ class Module:
 
 def _resolve(path: str | os.PathLike) -> tuple[Path, Path]:
     p = Path(path)
-    if p.suffix in (".so", ".json", ".h"):
+    if p.suffix in (".so", ".json", ".h", ".spv"):
         stem = p.with_suffix("")
     else:
         stem = p
@@ -153,10 +153,16 @@ def _resolve(path: str | os.PathLike) -> tuple[Path, Path]:
 
 def load(path: str | os.PathLike, *, from_cache: bool = False,
          compile_seconds: float = 0.0) -> Module:
-    """Load a compiled library: ``path`` is the ``.so``, the ``.json`` manifest or their stem."""
+    """Load a compiled library: ``path`` is the ``.so``, the ``.json`` manifest or their stem
+    (or a SPIR-V build's ``.spv``, whose kernels run on Vulkan)."""
     from ..compiler.targets import get_target, host_supports
 
     so, man = _resolve(path)
+    if man.is_file() and not so.is_file() and so.with_suffix(".spv").is_file():
+        from .spirv_module import load_spirv  # target spirv: shaders for Vulkan
+
+        return load_spirv(man, so.with_suffix(".spv"), from_cache=from_cache,
+                          compile_seconds=compile_seconds)
     if not man.is_file() or not so.is_file():
         missing = man if not man.is_file() else so
         raise FileNotFoundError(f"no compiled rdsl module at `{path}` (missing {missing})")

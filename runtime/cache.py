@@ -74,4 +74,5 @@ def cache_key(source_text: str, files: Iterable[os.PathLike | str], build: Build
 
 
 def entry_complete(d: Path) -> bool:
-    return all((d / f"{STEM}{s}").is_file() for s in (".so", ".json"))
+    return (d / f"{STEM}.json").is_file() and any((d / f"{STEM}{s}").is_file()
+                                                  for s in (".so", ".spv"))

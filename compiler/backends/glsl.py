@@ -78,6 +78,7 @@ class GlslPrinter(CLikePrinter):
     def __init__(self, *args, **kwargs) -> None:
         super().__init__(*args, **kwargs)
         self.table_names: set[str] = set()
+        self.pooled: dict[str, tuple[str, str]] = {}  # buffer name -> (pool, offset expr)
 
     def ctype(self, t: ir.Type) -> str:
         if not isinstance(t, ir.ScalarType) or t.lanes != 1:
@@ -192,12 +193,21 @@ class GlslPrinter(CLikePrinter):
         super().render_table(ins)
         self.table_names.add(self.names[ins.result])
 
+    def ref(self, buf: ir.Value, idx: ir.Value) -> str:
+        """The GLSL lvalue of element ``idx`` of a buffer: a buffer parameter is a range of
+        its element type's pool, from the offset ``pooled`` names (see glsl_entry.py)."""
+        name = self.v(buf)
+        if name in self.pooled:
+            pool, base = self.pooled[name]
+            return f"{pool}.d[{base} + uint({self.v(idx)})]"
+        return f"{name}[{self.v(idx)}]"
+
     def element(self, buf: ir.Value, idx: ir.Value) -> str:
         """The GLSL value of element ``idx`` of a buffer or table."""
         name, e = self.v(buf), buf.type.elem.name  # type: ignore[attr-defined]
         if name in self.table_names:
             return f"uintBitsToFloat({name}[{self.v(idx)}])"
-        ref = f"{name}[{self.v(idx)}]"
+        ref = self.ref(buf, idx)
         return f"({ref} != 0u)" if e == "bool" else ref
 
     def stored(self, buf: ir.Value, val: ir.Value) -> str:
@@ -215,12 +225,11 @@ class GlslPrinter(CLikePrinter):
 
     def render_store(self, ins: ir.Instr) -> None:
         buf, idx, val = ins.operands
-        self.line(f"{self.v(buf)}[{self.v(idx)}] = {self.stored(buf, val)};")
+        self.line(f"{self.ref(buf, idx)} = {self.stored(buf, val)};")
 
     def render_scatter(self, ins: ir.Instr) -> None:
         buf, idx, val, mask = ins.operands
-        self.line(f"if ({self.v(mask)}) {self.v(buf)}[{self.v(idx)}] = "
-                  f"{self.stored(buf, val)};")
+        self.line(f"if ({self.v(mask)}) {self.ref(buf, idx)} = {self.stored(buf, val)};")
 
 
 def check_width(module: ir.Module) -> int:

@@ -1,12 +1,14 @@
 """The GLSL text of one kernel as a compute shader, and the layout the runtime binds it with.
 
-Every argument of the kernel's C view (``base.c_args``) that is an array becomes a storage
-buffer (std430) of its elements, contiguous: binding 1 on, in argument order, then the mask
-(``uint`` 0/1 per element).  Binding 0 is the parameter block: the element count ``n``, a
-flag saying whether the mask is bound, then the uniform arguments (64-bit ones first, so
-every member sits at its natural alignment).  Invocation ``i`` (a 2-D dispatch of work
-groups of :data:`LOCAL_SIZE`, so more than 65535 groups fit) runs element ``i`` when
-``i < n`` and its mask is set; bools are 32-bit 0/1 in every buffer.
+Devices bind few storage buffers per shader (lavapipe: 32, Vulkan guarantees 4) and kernels
+take dozens of arrays, so arrays share one storage buffer per element type (a *pool*:
+``F`` float, ``I`` int, ``U`` uint, bools and the mask, ``L`` uint64_t), each from an offset
+the parameter block gives.  Binding 0 is the parameter block (std430): the element count
+``n``, whether the mask is set, one ``uint`` offset per array (the varying inputs, buffers
+and outputs of the kernel's C view, ``base.c_args``, in order, then the mask), then the
+uniform arguments (64-bit ones first, so that every member sits at its natural alignment).
+Invocation ``i`` (a 2-D dispatch of work groups of :data:`LOCAL_SIZE`, so more than 65535
+groups fit) runs element ``i`` when ``i < n`` and its mask is set; bools are 32-bit 0/1.
 """
 
 from __future__ import annotations
@@ -21,6 +23,8 @@ from .glsl import GLSL_MEM, GLSL_TYPES, GlslPrinter
 
 LOCAL_SIZE = 64
 _SIZE = {"f32": 4, "i32": 4, "u32": 4, "u64": 8, "bool": 4}
+POOLS = {"f32": ("F", 1), "i32": ("I", 2), "u32": ("U", 3), "bool": ("U", 3), "u64": ("L", 4)}
+N_BINDINGS = 5
 
 
 @dataclass
@@ -29,14 +33,14 @@ class Shader:
 
     name: str
     source: str
-    bindings: list[dict[str, Any]] = field(default_factory=list)  # binding k: arg, dtype
+    arrays: list[dict[str, Any]] = field(default_factory=list)  # arg, dtype, kind, offset
     uniforms: list[dict[str, Any]] = field(default_factory=list)  # name, dtype, offset
     params_size: int = 8
     int64: bool = False
 
     def layout(self) -> dict[str, Any]:
         """The manifest's description of the shader's bindings."""
-        return {"local_size": LOCAL_SIZE, "bindings": self.bindings,
+        return {"local_size": LOCAL_SIZE, "bindings": N_BINDINGS, "arrays": self.arrays,
                 "uniforms": self.uniforms, "params_size": self.params_size,
                 "int64": self.int64}
 
@@ -46,17 +50,38 @@ def shaders(module: ir.Module) -> list[Shader]:
     return [kernel_shader(fn) for fn in kernels(module)]
 
 
-def _params_block(args: list[CArg], names: list[str]) -> tuple[list[str], list[dict], int]:
-    """The members of the parameter block, their layout, and its size in bytes."""
+def _params_block(shader: Shader, args: list[CArg], names: list[str]) -> list[str]:
+    """Lay out the parameter block (offsets of the arrays, then the uniforms) in
+    ``shader``; returns its GLSL members."""
     members = ["uint n;", "uint has_mask;"]
-    layout: list[dict[str, Any]] = []
     offset = 8
-    uniform = [(a, n) for a, n in zip(args, names) if a.kind == "uniform"]
-    for a, name in sorted(uniform, key=lambda an: _SIZE[an[0].dtype] != 8):
+    arrays = [(a, n) for a, n in zip(args, names) if a.kind != "uniform"]
+    for a, name in [*arrays, (CArg("mask", "bool", "mask"), "mask")]:
+        members.append(f"uint o_{name};")
+        shader.arrays.append({"arg": a.name if a.kind != "mask" else None, "dtype": a.dtype,
+                              "kind": a.kind, "pool": POOLS[a.dtype][0], "offset": offset})
+        offset += 4
+    uniform = sorted([(a, n) for a, n in zip(args, names) if a.kind == "uniform"],
+                     key=lambda an: _SIZE[an[0].dtype] != 8)
+    if uniform and _SIZE[uniform[0][0].dtype] == 8 and offset % 8:
+        members.append("uint pad_;")
+        offset += 4
+    for a, name in uniform:
         members.append(f"{GLSL_MEM[a.dtype]} {name};")
-        layout.append({"name": a.name, "dtype": a.dtype, "offset": offset})
+        shader.uniforms.append({"name": a.name, "dtype": a.dtype, "offset": offset})
         offset += _SIZE[a.dtype]
-    return members, layout, offset
+    shader.params_size = offset
+    return members
+
+
+def _declarations(members: list[str], args: list[CArg]) -> list[str]:
+    out = ["layout(std430, binding = 0) readonly buffer Params {",
+           *("    " + m for m in members), "} p;"]
+    used = {POOLS[a.dtype] for a in args if a.kind != "uniform"} | {POOLS["bool"]}
+    for pool, k in sorted(used, key=lambda pk: pk[1]):
+        elem = {"F": "float", "I": "int", "U": "uint", "L": "uint64_t"}[pool]
+        out.append(f"layout(std430, binding = {k}) buffer Pool{pool} {{ {elem} d[]; }} {pool};")
+    return out
 
 
 # long: one straight sequence (declarations, inputs, body, outputs) per shader
@@ -69,31 +94,19 @@ def kernel_shader(fn: ir.Function) -> Shader:
     args = c_args(fn)
     names = ["a_" + n for n in c_arg_names(args)]
     n_in = sum(a.kind != "output" for a in args)
-    members, uniforms, size = _params_block(args, names)
-    shader = Shader(fn.name, "", uniforms=uniforms, params_size=size)
-    decls = ["layout(std430, binding = 0) readonly buffer Params {",
-             *("    " + m for m in members), "} p;"]
-    for a, name in zip(args, names):
-        if a.kind == "uniform":
-            continue
-        k = len(shader.bindings) + 1
-        access = {"varying": "readonly ", "output": "writeonly "}.get(a.kind, "")
-        decls.append(f"layout(std430, binding = {k}) {access}buffer B{k} "
-                     f"{{ {GLSL_MEM[a.dtype]} d[]; }} {name};")
-        shader.bindings.append({"binding": k, "arg": a.name, "dtype": a.dtype,
-                                "kind": a.kind})
-    k = len(shader.bindings) + 1
-    decls.append(f"layout(std430, binding = {k}) readonly buffer B{k} {{ uint d[]; }} mask_;")
-    shader.bindings.append({"binding": k, "arg": None, "dtype": "bool", "kind": "mask"})
+    shader = Shader(fn.name, "")
+    decls = _declarations(_params_block(shader, args, names), args)
 
     p = GlslPrinter({mask_param.value: "true"}, indent=1)
     for prm, a, name in zip(params, args[:n_in], names[:n_in]):
+        pool = POOLS[a.dtype][0]
         if a.kind == "buffer":
-            p.names[prm.value] = f"{name}.d"
+            p.names[prm.value] = name
+            p.pooled[name] = (pool, f"p.o_{name}")
         elif a.kind == "uniform":
             p.names[prm.value] = f"(p.{name} != 0u)" if a.dtype == "bool" else f"p.{name}"
         else:
-            ref = f"{name}.d[i]"
+            ref = f"{pool}.d[p.o_{name} + i]"
             p.line(f"{GLSL_TYPES[a.dtype]} in_{name} = "
                    + (f"{ref} != 0u;" if a.dtype == "bool" else f"{ref};"))
             p.names[prm.value] = f"in_{name}"
@@ -101,14 +114,15 @@ def kernel_shader(fn: ir.Function) -> Shader:
 
     def on_return(vals: list[str]) -> None:
         for name, v, a in zip(outs, vals, args[n_in:]):
-            p.line(f"{name}.d[i] = {f'uint({v})' if a.dtype == 'bool' else v};")
+            p.line(f"{POOLS[a.dtype][0]}.d[p.o_{name} + i] = "
+                   f"{f'uint({v})' if a.dtype == 'bool' else v};")
 
     p.on_return = on_return
     p.block(fn.body)
     body = ["void main() {",
             f"    uint i = gl_GlobalInvocationID.x + gl_GlobalInvocationID.y * "
             f"gl_NumWorkGroups.x * {LOCAL_SIZE}u;",
-            "    if (i >= p.n || (p.has_mask != 0u && mask_.d[i] == 0u)) return;",
+            "    if (i >= p.n || (p.has_mask != 0u && U.d[p.o_mask + i] == 0u)) return;",
             *p.lines, "}"]
     tables = [f"const uint {name}[{len(vals)}] = uint[{len(vals)}]("
               + ", ".join(_bits(v) for v in vals) + ");" for name, vals in p.tables.items()]
