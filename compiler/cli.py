@@ -43,8 +43,9 @@ def add_commands(sub: argparse._SubParsersAction) -> dict[str, Command]:
     k = sub.add_parser("compile", help="compile to a shared library, C header and manifest")
     k.add_argument("file")
     k.add_argument("--target", default="host",
-                   help="scalar, sse4, avx2, avx512, host (default), or c (SIMD C source "
-                        "compiled by the machine's cc)")
+                   help="scalar, sse4, avx2, avx512, host (default), c (SIMD C source "
+                        "compiled by the machine's cc), or spirv (GLSL compute shaders: "
+                        "STEM.comp, STEM.spv for Vulkan, STEM.json)")
     k.add_argument("--width", type=int, default=None, help=_WIDTH_HELP)
     k.add_argument("--variant", default="rgb", help=_VARIANTS_HELP)
     k.add_argument("-o", "--output", default=None,
@@ -135,9 +136,9 @@ def _compile(args: argparse.Namespace) -> int:
         print(f"wrote {out}")
         return 0
     stem = Path(args.output) if args.output else Path(src.stem)
-    if stem.suffix in (".so", ".h", ".json", ".c"):
+    if stem.suffix in (".so", ".h", ".json", ".c", ".comp", ".spv"):
         stem = stem.with_suffix("")
-    for ext in (".so", ".h", ".json", ".c"):
+    for ext in (".so", ".h", ".json", ".c", ".comp", ".spv"):
         _refuse_input(stem.with_suffix(ext) if stem.suffix == "" else
                       Path(str(stem) + ext), src)
     out_dir = stem.parent if str(stem.parent) else Path(".")
