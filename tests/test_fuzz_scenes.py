@@ -133,3 +133,15 @@ def test_the_corpus_itself_loads() -> None:
     assert len(CORPUS) >= 10
     for path in CORPUS:
         assert _load(path) is None, path
+
+
+@pytest.mark.parametrize("scale", ["1e30\"/><scale value=\"1e30", "nan"])
+def test_a_transform_that_overflows_float32_is_an_error_at_its_line(tmp_path: Path,
+                                                                   scale: str) -> None:
+    """(The fuzzer found it: the vertices reached Embree as inf and a ValueError came back.)"""
+    path = tmp_path / "big.xml"
+    path.write_text('<scene version="3.0.0">\n<shape type="rectangle">\n'
+                    f'  <transform name="to_world"><scale value="{scale}"/></transform>\n'
+                    '</shape>\n</scene>\n')
+    with pytest.raises(CompileError, match=r"big\.xml:3:.*not finite 32-bit floats"):
+        load_scene(path)

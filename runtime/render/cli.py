@@ -58,6 +58,16 @@ def render_command(args: Any) -> int:
     from ..scene.xml import parse_defines
     from .renderer import load_scene
 
+    if args.target == "ptx":  # a CUDA GPU runs the kernels, or nothing does
+        from ...compiler.targets import ptx_target
+        from ..cuda import cuda_status, device_arch
+
+        reason = cuda_status()
+        if reason is not None:
+            print(f"rdsl render: --target ptx needs a CUDA GPU: {reason}", file=sys.stderr)
+            return 1
+        args.target = ptx_target(device_arch())
+        args.accel = "bvh"  # Embree runs on the CPU: GPU rays go through the BVH in rdsl
     build = Build.of(args.target, args.variant)  # a bad name fails before the scene loads
     if build.target.backend == "spirv":  # shaders cannot call Embree: the BVH in rdsl
         if not (Path(__file__).resolve().parents[2] / "stdlib/render/bvh.rdsl").is_file():

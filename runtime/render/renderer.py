@@ -21,6 +21,7 @@ from typing import Any
 
 import numpy as np
 
+from ...compiler.backends.c_like import NoRayTracer
 from ...compiler.build import Build
 from ...compiler.diagnostics import CompileError
 from ...compiler.passes.ad_forward import TANGENT_BUFFER
@@ -282,6 +283,24 @@ class Scene:
 
         if self._module is not None and not again:
             return self._module
+        src, scene, filename = self._kernel_inputs()
+        try:
+            mod = jit(src, build=self.build, scene=scene, search_paths=self.search_paths,
+                      filename=filename)
+        except NoRayTracer:  # one line: what is missing, not the integrator's source
+            raise CompileError(_no_ray_tracer(self.path, self.build.target.name)) from None
+        if not self.specialize:  # and so do the tables the plugins compute per scene
+            self.prm = fill_tables(mod, self.scene_spec, self.prm, src, filename,
+                                   self.search_paths)
+        self._module = mod
+        self.compile_seconds = mod.compile_seconds
+        self.from_cache = mod.from_cache
+        return mod
+
+    def _kernel_inputs(self) -> tuple[str, SceneSpec, str]:
+        """The render kernel's source, what specialize is told about the scene, and the
+        file name its diagnostics show; sets the report, kernel_src, scene_spec and
+        search_paths (and PRM, for the generic build)."""
         src = kernel_source(self.desc, self.buffers, self.bsdfs, self.emitters,
                             self.build.model, derivative=self.derivative)
         scene = self.scene_spec_for_params()
@@ -295,16 +314,17 @@ class Scene:
             scene, prm = parameter_slots(scene, self.build.model)
             if not self._prm_set:
                 self.prm = prm
-        filename = str(self.path.with_suffix(".rdsl"))
-        mod = jit(src, build=self.build, scene=scene, search_paths=self.search_paths,
-                  filename=filename)
-        if not self.specialize:  # and so do the tables the plugins compute per scene
-            self.prm = fill_tables(mod, self.scene_spec, self.prm, src, filename,
-                                   self.search_paths)
-        self._module = mod
-        self.compile_seconds = mod.compile_seconds
-        self.from_cache = mod.from_cache
-        return mod
+        return src, scene, str(self.path.with_suffix(".rdsl"))
+
+    def kernel_ir(self) -> Any:
+        """The render kernels as IR after the whole pipeline for this scene's build (no
+        library: what ``emit_ptx`` or ``rdsl compile`` of another target starts from)."""
+        from ...compiler.driver import compile_kernels
+
+        src, scene, filename = self._kernel_inputs()
+        module, _ = compile_kernels(src, self.build, scene=scene, filename=filename,
+                                    search_paths=self.search_paths)
+        return module
 
     def scene_spec_for_params(self) -> SceneSpec:
         """What ``specialize`` is told about the scene: its instances and kinds."""
@@ -408,6 +428,9 @@ class Scene:
         cells = film["grid_w"] * film["grid_h"]
         batch = max(1, min(spp, BATCH_SAMPLES // max(cells, 1)))
         acc = new_accumulator(dict(film, spp=batch))
+        scene_args = self._scene_args(mod)
+        if hasattr(mod, "resident"):  # OpenCL: the film is accumulated on the device
+            acc = mod.resident(acc)
         pixels = np.arange(film["crop_w"] * film["crop_h"], dtype=np.int32)
         self.nonfinite = 0
         bar = Progress(spp, label="rendering", unit="spp", enabled=progress)
@@ -426,7 +449,7 @@ class Scene:
                 if n != batch:  # the last, smaller batch
                     outs = [None, None]
                 rs = np.array([done, spp, seed_bits], np.int32)
-                job = mod["render_sample"](j[:cells * n], rs, *self.buffers.args(),
+                job = mod["render_sample"](j[:cells * n], rs, *scene_args,
                                            *self._param_args(mod), threads=threads,
                                            out=outs[k % 2], wait=False)
             if waiting is not None:
@@ -446,7 +469,28 @@ class Scene:
                     bar.finish()
                     raise RenderCancelled(f"cancelled after {done} of {spp} spp")
         bar.finish()
-        return develop(acc, dict(film, spp=spp))
+        return develop(acc.get() if hasattr(acc, "get") else acc, dict(film, spp=spp))
+
+    def _scene_args(self, mod: Any) -> list[Any]:
+        """The scene's buffers for ``mod``'s kernels: the arrays, or on a device target
+        (``mod.resident``: OpenCL) their copies on the device, made once per module."""
+        if not hasattr(mod, "resident"):
+            return self.buffers.args()
+        if getattr(self, "_resident", (None,))[0] is not mod:
+            self._resident = (mod, [mod.resident(b) for b in self.buffers.args()])
+        return self._resident[1]
+
+
+def _no_ray_tracer(path: Path, target: str) -> str:
+    """What a scene that traces rays lacks on a target without Embree."""
+    from ...compiler.sources import STDLIB
+
+    if (STDLIB / "render" / "bvh.rdsl").is_file():
+        return (f"{path.name}: the scene traces rays, which target `{target}` does with the "
+                "BVH written in rdsl only: render with --accel bvh")
+    return (f"{path.name}: the scene traces rays, and target `{target}` has no ray tracer "
+            "yet (it needs the BVH written in rdsl, stdlib/render/bvh.rdsl, which this build "
+            "lacks); render with an LLVM target (--target host)")
 
 
 def _film_samples(out: dict[str, Any], ns: int) -> np.ndarray:

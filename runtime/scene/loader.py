@@ -24,7 +24,6 @@ from typing import Any
 import numpy as np
 
 from ...compiler.ir import Loc
-from ...dsl.parser import F32_OVERFLOW
 from ..plugins import KINDS as PLUGIN_KINDS
 from ..plugins import PluginDecl, PluginRegistry, scene_spec, stdlib_names
 from . import meshes
@@ -370,11 +369,10 @@ class _Builder:
                               "the transformed mesh instead", stacklevel=2)
         face_normals = bool(p.get("face_normals") or mesh.face_normals)
         p["to_world"] = m
-        obj.mesh = meshes.to_world(mesh, m, p["flip_normals"], face_normals)
-        if not np.all(np.abs(obj.mesh.vertices) < F32_OVERFLOW):  # NaN fails this too
-            raise scene_error(f"{self.what(node)}: its vertices in world space are not finite "
-                              "32-bit floats (check 'to_world' and the shape's size)",
-                              _loc(node, "to_world"))
+        try:
+            obj.mesh = meshes.to_world(mesh, m, p["flip_normals"], face_normals)
+        except MeshError as e:
+            raise scene_error(f"{self.what(node)}: {e}", _loc(node, "to_world")) from None
         bsdfs, ems = objects["bsdf"], objects["emitter"]
         # Mitsuba's default (shape.cpp): diffuse, black on an emitter's shape
         obj.bsdf = bsdfs[0][0] if bsdfs else self.default(
