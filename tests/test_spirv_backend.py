@@ -153,6 +153,25 @@ def test_uint64_and_pcg32_bit_exact():
         assert np.array_equal(g, w)
 
 
+@needs_vulkan
+def test_float_rem_is_fmodf_bit_for_bit():
+    """GLSL has no fmod (its ``mod`` floors); the shader's is musl's exact integer one."""
+    mod = rdsl.jit("fn r(a: Float, b: Float) -> Float { return a % b; }", target="spirv")
+    rng = np.random.default_rng(0)
+    a, b = rng.integers(0, 2**32, size=(2, 20000), dtype=np.uint64).astype(np.uint32)
+    special = np.array([0.0, -0.0, 1.0, -3.0, 1e-45, -1e-38, np.inf, -np.inf, np.nan, 5.5,
+                        1e30, 3.4e38], np.float32)
+    sa, sb = np.meshgrid(special, special)
+    a = np.concatenate([a.view(np.float32), sa.ravel(),
+                        rng.uniform(-99, 99, 5000).astype(np.float32)])
+    b = np.concatenate([b.view(np.float32), sb.ravel(),
+                        rng.uniform(-3, 3, 5000).astype(np.float32)])
+    with np.errstate(all="ignore"):
+        want = np.fmod(a, b)  # C's fmodf
+    assert_bitwise({"name": "r", "args": [{"name": "ret", "kind": "output"}]},
+                   [mod["r"](a, b)], [want])
+
+
 LOOPS = """
 fn cube(n: Int) -> Float {
     var acc = 0.0;

@@ -8,8 +8,8 @@ GLSL ``bool`` (``&&``, ``||``, ``^^``); conversions are constructors (``int(x)``
 are ``floatBitsToUint`` and friends; f32 constants are exact (a decimal literal that
 round-trips, else ``uintBitsToFloat``).  Integer arithmetic in SPIR-V wraps, as the IR's does;
 signed ``rem`` is spelled ``a - (a / b) * b`` (GLSL's ``%`` may be lowered to ``OpSMod``,
-whose sign follows the divisor).  Float ``rem`` is ``a - b * trunc(a / b)``: not C's exact
-``fmodf`` (off by an ulp or so of ``a`` when ``a / b`` rounds).
+whose sign follows the divisor).  Float ``rem`` is C's ``fmodf``, exact: :data:`FMODF`, musl's
+integer algorithm (``a - b * trunc(a / b)`` is not, once the quotient rounds).
 
 64-bit integers (``UInt64``, which PCG32 uses) need ``GL_ARB_gpu_shader_int64`` and a device
 with ``shaderInt64`` (lavapipe has it; the runtime says so where a device has not).  Float
@@ -34,6 +34,49 @@ GLSL_TYPES = {"f32": "float", "i32": "int", "u32": "uint", "u64": "uint64_t", "b
 # how each dtype lies in a storage buffer (bools as 32-bit 0/1)
 GLSL_MEM = {"f32": "float", "i32": "int", "u32": "uint", "u64": "uint64_t", "bool": "uint"}
 _ZERO = {"f32": "0.0", "i32": "0", "u32": "0u", "u64": "0ul", "bool": "false"}
+
+
+# C's fmodf in GLSL, exact: musl's fmodf (integer long division of the significands)
+FMODF = """float rdsl_fmodf(float x, float y) {
+    uint ux = floatBitsToUint(x), uy = floatBitsToUint(y);
+    int ex = int(ux >> 23 & 0xffu), ey = int(uy >> 23 & 0xffu);
+    uint sx = ux & 0x80000000u;
+    if (uy << 1 == 0u || isnan(y) || ex == 0xff) return uintBitsToFloat(0x7fc00000u);
+    if (ux << 1 <= uy << 1) return ux << 1 == uy << 1 ? uintBitsToFloat(sx) : x;
+    uint i;
+    if (ex == 0) {
+        for (i = ux << 9; i >> 31 == 0u; ex--, i <<= 1) {}
+        ux <<= uint(-ex + 1);
+    } else {
+        ux = (ux & 0x7fffffu) | 0x800000u;
+    }
+    if (ey == 0) {
+        for (i = uy << 9; i >> 31 == 0u; ey--, i <<= 1) {}
+        uy <<= uint(-ey + 1);
+    } else {
+        uy = (uy & 0x7fffffu) | 0x800000u;
+    }
+    for (; ex > ey; ex--) {
+        i = ux - uy;
+        if (i >> 31 == 0u) {
+            if (i == 0u) return uintBitsToFloat(sx);
+            ux = i;
+        }
+        ux <<= 1;
+    }
+    i = ux - uy;
+    if (i >> 31 == 0u) {
+        if (i == 0u) return uintBitsToFloat(sx);
+        ux = i;
+    }
+    for (; ux >> 23 == 0u; ux <<= 1, ex--) {}
+    if (ex > 0) {
+        ux = (ux - 0x800000u) | (uint(ex) << 23);
+    } else {
+        ux >>= uint(-ex + 1);
+    }
+    return uintBitsToFloat(ux | sx);
+}"""
 
 
 class GlslBackend(Backend):
@@ -79,6 +122,7 @@ class GlslPrinter(CLikePrinter):
         super().__init__(*args, **kwargs)
         self.table_names: set[str] = set()
         self.pooled: dict[str, tuple[str, str]] = {}  # buffer name -> (pool, offset expr)
+        self.uses_fmodf = False  # float rem: FMODF, defined before main
 
     def ctype(self, t: ir.Type) -> str:
         if not isinstance(t, ir.ScalarType) or t.lanes != 1:
@@ -131,7 +175,10 @@ class GlslPrinter(CLikePrinter):
         a, b = self.operands(ins)
         div = ins.op is ir.Op.DIV
         if t.is_float:
-            return f"({a} / {b})" if div else f"({a} - {b} * trunc({a} / {b}))"
+            if div:
+                return f"({a} / {b})"
+            self.uses_fmodf = True
+            return f"rdsl_fmodf({a}, {b})"
         z = _ZERO[t.name]
         if not t.is_signed:
             return f"({b} == {z} ? {z} : ({a} {'/' if div else '%'} {b}))"
@@ -237,5 +284,5 @@ def check_width(module: ir.Module) -> int:
     return GlslBackend().check_module(module)
 
 
-__all__ = ["GLSL_MEM", "GLSL_TYPES", "GlslBackend", "GlslPrinter", "check_width",
+__all__ = ["FMODF", "GLSL_MEM", "GLSL_TYPES", "GlslBackend", "GlslPrinter", "check_width",
            "glsl_float", "glsl_int"]
