@@ -42,6 +42,10 @@ def add_commands(sub: argparse._SubParsersAction) -> dict[str, Callable[[Any], i
                         "every emitter kind (default: specialized, generic with --watch)")
     r.add_argument("--triangulate", action="store_true",
                    help="render spheres and disks as triangle meshes, not analytic shapes")
+    r.add_argument("--accel", choices=("embree", "bvh"), default=None,
+                   help="trace rays with Embree (the default on CPU targets) or with the BVH "
+                        "written in rdsl (stdlib/render/bvh.rdsl; the default on opencl, "
+                        "spirv and ptx)")
     r.add_argument("--plugins", action="append", default=[], metavar="DIR",
                    help="a folder (or .rdsl file) of BSDF, texture and emitter plugins, "
                         "searched after the scene's folder (repeatable; also "
@@ -94,7 +98,8 @@ def render_command(args: Any) -> int:
     t0 = time.perf_counter()
     scene = load_scene(scene_path, build=build, specialize=specialize,
                        triangulate=getattr(args, "triangulate", False),
-                       plugins=getattr(args, "plugins", []), **defines)
+                       plugins=getattr(args, "plugins", []),
+                       accel=getattr(args, "accel", None), **defines)
     t_load = time.perf_counter() - t0
     integ = scene.desc.integrator
     lit = [i for i in [integ, *integ.children] if i.type in ("path", "direct")

@@ -32,6 +32,7 @@ from ...core.scene_spec import Instance, SceneSpec
 from ..tables import fill_tables
 from ..scene import load_scene_description
 from ..scene.reads import recording
+from .bvh import scene_bvh
 from .bsdfs import (
     bsdf_instance,
     dispersion_warnings,
@@ -52,6 +53,7 @@ from .shapes import KINDS as SHAPE_KINDS
 from .shapes import RECORD, shape_record, user_geometry
 from .textures import TextureTable
 
+ACCELS = ("embree", "bvh")  # how rays are traced (`--accel`)
 # samples per kernel call: small enough that a batch's sample buffers stay in cache
 BATCH_SAMPLES = 1 << 17
 
@@ -74,6 +76,9 @@ class SceneBuffers:
     meshes: list[tuple[np.ndarray, np.ndarray]] = field(default_factory=list)
     T: np.ndarray = field(default_factory=lambda: np.zeros(3, np.float32))  # texels
     textures: list[Instance] = field(default_factory=list)
+    # the BVH of `--accel bvh` (stdlib/render/bvh.rdsl; an empty tree with Embree)
+    BV: np.ndarray = field(default_factory=lambda: np.zeros(1, np.float32))
+    BI: np.ndarray = field(default_factory=lambda: np.zeros(4, np.int32))
 
     @property
     def nlight(self) -> int:
@@ -82,7 +87,7 @@ class SceneBuffers:
 
     def args(self) -> list[np.ndarray]:
         return [self.P, self.N, self.UV, self.F, self.G, self.lights.LC, self.lights.LT,
-                self.T, *self.lights.args()]
+                self.T, *self.lights.args(), self.BV, self.BI]
 
 
 def _flat(v: np.ndarray, f: np.ndarray, normals: Any) -> bool:
@@ -216,8 +221,14 @@ class Scene:
     tangents: np.ndarray | None = None  # its dPRM
 
     def __init__(self, path: str | Path, build: Build, specialize: bool = True,
-                 triangulate: bool = False, plugins: Any = (), **defaults: Any) -> None:
+                 triangulate: bool = False, plugins: Any = (), accel: str | None = None,
+                 **defaults: Any) -> None:
+        if accel is None:  # Embree runs on the CPU; other devices trace through the rdsl BVH
+            accel = "embree" if build.target.backend in ("llvm", "c") else "bvh"
+        if accel not in ACCELS:
+            raise CompileError(f"unknown accel `{accel}` (valid: {', '.join(ACCELS)})")
         self.path = Path(path)
+        self.accel = accel
         self.build = build
         self.specialize = specialize
         self.triangulate = triangulate
@@ -233,7 +244,7 @@ class Scene:
         new = Scene.__new__(Scene)
         new.path, new.build, new.specialize = self.path, self.build, self.specialize
         new.triangulate, new.defaults = self.triangulate, self.defaults
-        new.plugins = self.plugins
+        new.plugins, new.accel = self.plugins, self.accel
         new._read(self)
         return new
 
@@ -261,8 +272,12 @@ class Scene:
         self.geometry_key = _geometry_key(self.buffers)
         self.geometry_reused = previous is not None and \
             previous.geometry_key == self.geometry_key
+        self.embree = self.bvh = None
         if self.geometry_reused:
-            self.embree = previous.embree
+            self.embree, self.bvh = previous.embree, previous.bvh
+            self.buffers.BV, self.buffers.BI = previous.buffers.BV, previous.buffers.BI
+        elif self.accel == "bvh":  # traversal in rdsl (stdlib/render/bvh.rdsl)
+            self.buffers.BV, self.buffers.BI, self.bvh = scene_bvh(self.buffers)
         else:
             # two levels (a BVH per shape under one over the shapes): scenes of a few large
             # shapes, such as the Cornell box, trace about a third faster than through one
@@ -332,7 +347,7 @@ class Scene:
         kinds = tuple(sorted({int(k) for k in self.buffers.lights.EK[0::4]}))
         shapes = tuple(sorted({_shape_kind(int(g)) for g in self.buffers.G[3::4]}))
         return SceneSpec(bsdfs, self.emitters, self.buffers.textures, leaves, kinds, shapes,
-                         integrator_instances(self.desc.integrator))
+                         integrator_instances(self.desc.integrator), self.accel)
 
     @property
     def params(self) -> SceneParams:
@@ -376,6 +391,9 @@ class Scene:
         sky = ("none, the miss branch folds away" if env < 0
                else f"emitter {env} ({kinds[int(self.buffers.lights.EK[4 * env])]})")
         lines = [f"textures: {len(scene.textures)} ({plugins})", f"environment: {sky}"]
+        if self.bvh is not None:
+            lines.append(f"accel: bvh, {self.bvh.nodes} nodes over {len(self.bvh.prims)} "
+                         f"primitives, built in {self.bvh.build_seconds:.2f} s")
         if self.specialize:
             folded = f"sampling code for {lacks} folded away"
             return [f"parameters: {len(values)} values of {n} instance(s) folded as constants",
@@ -423,6 +441,9 @@ class Scene:
         seed = self.seed if seed is None else int(seed)
         mod = self.compile()
         if mod.traces_rays:  # a path tracer with max_depth 0 traces none: its image is black
+            if self.embree is None:
+                raise CompileError("the render kernel traces rays through Embree, but the "
+                                   f"scene was loaded with accel `{self.accel}`")
             mod.bind_scene(self.embree)
         film = film_uniforms(self.desc.sensor.film, 1, channels=len(self.channel_names))
         cells = film["grid_w"] * film["grid_h"]
@@ -512,16 +533,19 @@ def _film_samples(out: dict[str, Any], ns: int) -> np.ndarray:
 def load_scene(path: str | Path, variant: str | ColorModel = "rgb",
                target: str | Target = "host", specialize: bool = True,
                triangulate: bool = False, *, build: Build | None = None,
-               plugins: Any = (), **defaults: Any) -> Scene:
+               plugins: Any = (), accel: str | None = None, **defaults: Any) -> Scene:
     """Load a Mitsuba 3 XML scene for rendering (``-D name=value`` as keyword args).
     ``specialize=False`` gives the generic build (parameters read at run time).  ``build``,
     when given, replaces ``variant`` and ``target``; a bad name of either is a diagnostic
     before the scene is read.  ``plugins``: folders (or ``.rdsl`` files) searched for the
     scene's BSDF, texture and emitter plugins after the scene's own folder and before
-    ``$RDSL_PLUGIN_PATH``, the registered plugins and the stdlib (docs/plugins.md)."""
+    ``$RDSL_PLUGIN_PATH``, the registered plugins and the stdlib (docs/plugins.md).
+    ``accel``: "embree" (the default on CPU targets) traces rays with Embree, "bvh" (the
+    default on opencl, spirv and ptx) with the BVH written in rdsl (stdlib/render/bvh.rdsl,
+    built by runtime/render/bvh.py)."""
     build = build or Build.of(target, variant)
     return Scene(path, build, specialize=specialize, triangulate=triangulate,
-                 plugins=plugins, **defaults)
+                 plugins=plugins, accel=accel, **defaults)
 
 
 def load_dict(scene: dict, variant: str | ColorModel = "rgb", target: str | Target = "host",
