@@ -73,13 +73,6 @@ def render_command(args: Any) -> int:
         args.target = ptx_target(device_arch())
         args.accel = "bvh"  # Embree runs on the CPU: GPU rays go through the BVH in rdsl
     build = Build.of(args.target, args.variant)  # a bad name fails before the scene loads
-    if build.target.backend == "spirv":  # shaders cannot call Embree: the BVH in rdsl
-        if not (Path(__file__).resolve().parents[2] / "stdlib/render/bvh.rdsl").is_file():
-            raise CompileError("rdsl render --target spirv: rendering needs ray tracing "
-                               "written in rdsl (a BVH, stdlib/render/bvh.rdsl), which is not "
-                               "there yet; the spirv target compiles and runs kernels that "
-                               "trace no rays (rdsl compile, rdsl.jit)")
-        args.accel = "bvh"
     scene_path = Path(args.scene)
     if not scene_path.is_file():
         raise CompileError(f"{scene_path}: no such scene file")
