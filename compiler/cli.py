@@ -46,7 +46,8 @@ def add_commands(sub: argparse._SubParsersAction) -> dict[str, Command]:
     k.add_argument("--target", default="host",
                    help="scalar, sse4, avx2, avx512, host (default), c (SIMD C source "
                         "compiled by the machine's cc), opencl (STEM.cl: OpenCL C, built "
-                        "by the OpenCL driver when loaded), or ptx (CUDA PTX: STEM.ptx)")
+                        "by the OpenCL driver when loaded), ptx (CUDA PTX: STEM.ptx), or "
+                        "spirv (GLSL compute shaders STEM.comp, SPIR-V STEM.spv for Vulkan)")
     k.add_argument("--width", type=int, default=None, help=_WIDTH_HELP)
     k.add_argument("--arch", default=None, help=_ARCH_HELP)
     k.add_argument("--variant", default="rgb", help=_VARIANTS_HELP)
@@ -143,9 +144,9 @@ def _compile(args: argparse.Namespace) -> int:
         print(f"wrote {out}")
         return 0
     stem = Path(args.output) if args.output else Path(src.stem)
-    if stem.suffix in (".so", ".h", ".json", ".c", ".cl", ".ptx"):
+    if stem.suffix in (".so", ".h", ".json", ".c", ".cl", ".ptx", ".comp", ".spv"):
         stem = stem.with_suffix("")
-    for ext in (".so", ".h", ".json", ".c", ".cl", ".ptx"):
+    for ext in (".so", ".h", ".json", ".c", ".cl", ".ptx", ".comp", ".spv"):
         _refuse_input(stem.with_suffix(ext) if stem.suffix == "" else
                       Path(str(stem) + ext), src)
     out_dir = stem.parent if str(stem.parent) else Path(".")

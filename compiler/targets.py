@@ -33,7 +33,7 @@ class Target:
     features: str
     requires: tuple[str, ...] = ()
     vector_bits: int = 128
-    backend: str = "llvm"  # which code generator: "llvm", "c", "opencl" or "ptx" (NVPTX)
+    backend: str = "llvm"  # code generator: "llvm", "c", "opencl", "ptx" (NVPTX), "spirv"
 
     @property
     def triple(self) -> str:
@@ -94,7 +94,8 @@ def host_features() -> frozenset[str]:
 def host_supports(target: Target | str) -> bool:
     """True if code compiled for ``target`` can run on this machine."""
     t = get_target(target) if isinstance(target, str) else target
-    if t.backend in ("c", "opencl"):  # compiled on this machine (cc, the OpenCL driver)
+    if t.backend in ("c", "opencl", "spirv"):  # built on this machine (cc, the OpenCL
+        # driver); spirv: a Vulkan device, checked when a kernel runs
         return True
     if t.backend == "ptx":  # runs on a CUDA GPU (runtime/cuda.py), never on the CPU
         return False
@@ -139,22 +140,33 @@ def ptx_target(arch: str = "sm_70") -> Target:
     return Target("ptx", 1, arch, "", (), 32, backend="ptx")
 
 
+def spirv_target(width: int | None = None) -> Target:
+    """The SPIR-V target (GLSL compute shaders on Vulkan): one element per invocation."""
+    if width not in (None, 1):
+        raise CompileError(f"target `spirv` runs one element per shader invocation: its "
+                           f"width is 1, not {width}")
+    return Target("spirv", 1, "vulkan", "", (), 32, backend="spirv")
+
+
 def get_target(name: str | Target, width: int | None = None) -> Target:
     """Look a target up by name (``scalar``, ``sse4``, ``avx2``, ``avx512``, ``host`` or
-    ``c``), ``opencl`` or ``ptx``.  ``width`` picks the width of ``c`` and ``opencl``; an
-    LLVM target has its own, which a different ``width`` contradicts (a diagnostic)."""
+    ``c``), ``opencl``, ``ptx`` or ``spirv``.  ``width`` picks the width of ``c`` and
+    ``opencl``; an LLVM target has its own, which a different ``width`` contradicts (a
+    diagnostic)."""
     if isinstance(name, Target):
         t = name
     elif name in ("c", "opencl"):
         return c_target(width, name)
     elif name == "ptx":
         t = ptx_target()
+    elif name == "spirv":
+        return spirv_target(width)
     elif name == "host":
         t = host_target()
     else:
         found = TARGETS.get(name)
         if found is None:
-            valid = ", ".join([*TARGETS, "host", "c", "opencl", "ptx"])
+            valid = ", ".join([*TARGETS, "host", "c", "opencl", "ptx", "spirv"])
             raise CompileError(f"unknown target `{name}` (valid targets: {valid})")
         t = found
     if width is not None and width != t.width:

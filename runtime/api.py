@@ -147,7 +147,7 @@ class Module:
 
 def _resolve(path: str | os.PathLike) -> tuple[Path, Path]:
     p = Path(path)
-    if p.suffix in (".so", ".json", ".h", ".cl"):
+    if p.suffix in (".so", ".json", ".h", ".cl", ".spv"):
         stem = p.with_suffix("")
     else:
         stem = p
@@ -156,8 +156,8 @@ def _resolve(path: str | os.PathLike) -> tuple[Path, Path]:
 
 def load(path: str | os.PathLike, *, from_cache: bool = False,
          compile_seconds: float = 0.0) -> Module:
-    """Load a compiled library: ``path`` is the ``.so`` (the ``.cl`` of target opencl), the
-    ``.json`` manifest or their stem."""
+    """Load a compiled library: ``path`` is the ``.so`` (the ``.cl`` of target opencl, the
+    ``.spv`` of target spirv), the ``.json`` manifest or their stem."""
     from ..compiler.targets import get_target, host_supports
 
     so, man = _resolve(path)
@@ -172,6 +172,8 @@ def load(path: str | os.PathLike, *, from_cache: bool = False,
             raise CompileError(f"{man}: not a valid rdsl manifest ({e})") from None
         if manifest.get("backend") == "opencl":  # an OpenCL C program, built at load
             so = so.with_suffix(".cl")
+        if manifest.get("backend") == "spirv":  # shaders for Vulkan
+            so = so.with_suffix(".spv")
     if not man.is_file() or not so.is_file():
         missing = man if not man.is_file() else so
         raise FileNotFoundError(f"no compiled rdsl module at `{path}` (missing {missing})")
@@ -188,6 +190,11 @@ def load(path: str | os.PathLike, *, from_cache: bool = False,
     if not runnable:
         raise RuntimeError(f"{so} was compiled for target `{target}`, which this CPU cannot "
                            "run; recompile with --target host")
+    if manifest.get("backend") == "spirv":
+        from .spirv_module import load_spirv
+
+        return load_spirv(man, so, manifest, from_cache=from_cache,
+                          compile_seconds=compile_seconds)
     if manifest.get("backend") == "opencl":
         from .opencl import load_opencl
 

@@ -74,6 +74,6 @@ def cache_key(source_text: str, files: Iterable[os.PathLike | str], build: Build
 
 
 def entry_complete(d: Path) -> bool:
-    # a native library, or the OpenCL C program of target opencl
+    # a native library, the OpenCL C program of target opencl, or target spirv's SPIR-V
     return (d / f"{STEM}.json").is_file() and \
-        any((d / f"{STEM}{s}").is_file() for s in (".so", ".cl"))
+        any((d / f"{STEM}{s}").is_file() for s in (".so", ".cl", ".spv"))

@@ -188,6 +188,10 @@ def build_library(module: ir.Module, target: Target | str, out_dir: str | os.Pat
         from .c_build import build_c_library
 
         return build_c_library(module, t, out_dir, stem)
+    if t.backend == "spirv":
+        from .spirv_build import build_spirv_library
+
+        return build_spirv_library(module, t, out_dir, stem)
     out = writable_dir(out_dir)
     paths = {"so": out / f"{stem}.so", "header": out / f"{stem}.h",
              "manifest": out / f"{stem}.json"}
