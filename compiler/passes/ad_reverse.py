@@ -267,8 +267,8 @@ class _Reverse:
             blocks.append(nb)
             locals_.append({v: a for v, a in local.items() if v not in defined})
         free = list(dict.fromkeys(v for lo in locals_ for v in lo))
-        if not free:
-            return
+        if not free and not any(i.op is Op.STORE for nb in blocks for i in nb.walk()):
+            return  # nothing flows out and no gradient is stored
         for nb, lo in zip(blocks, locals_):
             rb = Builder(nb, ins.loc)
             rb.yield_(*[lo.get(v) or rb.const(0.0, F32) for v in free])

@@ -1,0 +1,170 @@
+"""Reverse-mode gradients of a scene's image: ``scene.backward(d_img, params=[...])``.
+
+``backward`` returns d loss / d parameter for every name in ``params`` at once, given
+d loss / d image (``d_img``, shaped like ``render()``'s colour channels), by one adjoint
+render: the generic kernel built with ``ad="reverse"`` (compiler/passes/ad_reverse.py).
+Per batch of samples:
+
+1. the plain generic kernel gives each sample's film weights, and so each pixel's total
+   weight (the film divides by it: a pixel is sum w v / sum w);
+2. each sample's adjoint is then sum over the pixels it reaches of w * d_img / total
+   weight, computed here (it only moves numbers between the image and the samples);
+3. the adjoint kernel recomputes the sample and sweeps it backwards, adding the gradient of
+   ``PRM`` into a row of ``gPRM`` of its own per sample (``ad_row``): no two lanes or threads
+   write one element, and the rows are summed at the end.
+
+The estimate is that of the same Monte Carlo render (same seed and spp), as
+``render_forward``'s: the dot product of ``backward``'s gradient with a tangent equals that
+of ``render_forward``'s derivative image with ``d_img`` (tests/test_ad_reverse.py).
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from ...compiler.build import Build
+from ...compiler.diagnostics import CompileError
+from .differentiable import _lookup
+from .film import film_reach, film_uniforms
+
+if TYPE_CHECKING:
+    from .renderer import Scene
+
+__all__ = ["backward"]
+
+
+def _reverse_scene(scene: Scene) -> Scene:
+    """The scene's reverse-mode twin: same description and buffers, a generic build whose
+    kernel also takes the adjoints of its results."""
+    twin = getattr(scene, "_reverse", None)
+    if twin is None or twin.desc is not scene.desc:
+        from .renderer import Scene as SceneClass
+
+        twin = SceneClass.__new__(SceneClass)
+        twin.__dict__.update(scene.__dict__)
+        twin.build = Build(scene.build.target, scene.build.model, "reverse")
+        twin.specialize, twin.derivative, twin._prm_set = False, False, True
+        twin._module = None
+        twin._forward = twin._reverse = None
+        scene._reverse = twin
+    return twin
+
+
+def _check(scene: Scene, d_img: Any, params: list[str]) -> tuple[np.ndarray, dict]:
+    """``d_img`` as float64 and the slots of ``params``, or a clear error."""
+    if scene.build.model.spectral:
+        raise CompileError("reverse-mode gradients in the spectral variants are not "
+                           "supported yet (colours are stored as upsampling coefficients); "
+                           "render in `rgb` or `mono`")
+    if isinstance(params, str):
+        params = [params]
+    slots = scene.params.slots
+    integrators = {i.name or i.plugin for i in scene.scene_spec_for_params().integrators}
+    chosen = {}
+    for name in params:
+        key, slot = _lookup(slots, name)
+        if key.split(".")[0] in integrators:
+            raise CompileError(f"`{name}` is an integer setting of the integrator, which has "
+                               "no derivative; differentiate a BSDF, texture or emitter "
+                               "parameter")
+        chosen[name] = slot
+    film = film_uniforms(scene.desc.sensor.film, 1, channels=1)
+    c = 1 if scene.build.model.mono else 3
+    shape = (film["crop_h"], film["crop_w"], c)
+    d = np.asarray(d_img, np.float64)
+    if d.shape != shape and not (c == 1 and d.shape == shape[:2]):
+        raise ValueError(f"d_img has shape {d.shape}; the image's colour channels are "
+                         f"{shape}")
+    return d.reshape(shape), chosen
+
+
+def _pixels(film: dict, j: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """The film columns and rows (crop-relative) that samples ``j`` reach, (samples, m)."""
+    cell = j % (film["grid_w"] * film["grid_h"])
+    gx = cell % film["grid_w"] + film["grid_x"]
+    gy = cell // film["grid_w"] + film["grid_y"]
+    k = np.arange(2 * n + 1)
+    return (gx[:, None] - n + k - film["crop_x"], gy[:, None] - n + k - film["crop_y"])
+
+
+def _splat(film: dict, j: np.ndarray, out: dict, n: int, values: np.ndarray | None,
+           into: np.ndarray | None = None) -> np.ndarray:
+    """With ``values`` None: add each sample's weights into ``into`` (crop_h, crop_w);
+    otherwise gather, per sample, sum w * values[pixel] over the pixels it reaches."""
+    m = 2 * n + 1
+    qx, qy = _pixels(film, j, n)
+    wx = np.stack([np.asarray(out[f"w{k}"], np.float64) for k in range(m)], 1)
+    wy = np.stack([np.asarray(out[f"w{m + k}"], np.float64) for k in range(m)], 1)
+    h, w = film["crop_h"], film["crop_w"]
+    ok_x, ok_y = (qx >= 0) & (qx < w), (qy >= 0) & (qy < h)
+    cx, cy = np.clip(qx, 0, w - 1), np.clip(qy, 0, h - 1)
+    acc = 0.0 if values is not None else None
+    for dy in range(m):
+        for dx in range(m):
+            wgt = wx[:, dx] * wy[:, dy] * (ok_x[:, dx] & ok_y[:, dy])
+            if values is None:
+                np.add.at(into, (cy[:, dy], cx[:, dx]), wgt)
+            else:
+                acc = acc + wgt[:, None] * values[cy[:, dy], cx[:, dx]]
+    return into if values is None else acc
+
+
+# long: two passes over the batches, then the reduction
+def backward(scene: Scene, d_img: Any, params: list[str], spp: int | None = None,
+             seed: int | None = None, threads: int | None = None) -> dict[str, np.ndarray]:
+    """d loss / d parameter for each name of ``params``, given d loss / d image."""
+    from .renderer import BATCH_SAMPLES
+
+    d, chosen = _check(scene, d_img, params)
+    spp = int(spp or scene.spp)
+    seed = scene.seed if seed is None else int(seed)
+    scene.use_generic()
+    plain = scene.compile()
+    twin = _reverse_scene(scene)
+    mod = twin.compile()
+    for m in (plain, mod):
+        if m.traces_rays:
+            m.bind_scene(scene.embree)
+    prm = np.array(scene.prm, np.float32)
+    twin.prm = prm
+    film = film_uniforms(scene.desc.sensor.film, 1, channels=1)
+    n = film_reach(film)
+    cells = film["grid_w"] * film["grid_h"]
+    batch = max(1, min(spp, BATCH_SAMPLES // max(cells, 1)))
+    seed_bits = int(np.uint32(seed).view(np.int32))
+    batches = []
+    for done in range(0, spp, batch):
+        k = min(batch, spp - done)
+        j = np.arange(cells * k, dtype=np.int32)
+        rs = np.array([done, spp, seed_bits], np.int32)
+        batches.append((j, rs))
+    weights = np.zeros((film["crop_h"], film["crop_w"]))
+    outs = []
+    for j, rs in batches:  # 1. the film's total weight per pixel
+        out = plain["render_sample"](j, rs, *scene.buffers.args(), prm, threads=threads)
+        outs.append(out)
+        _splat(film, j, out, n, None, weights)
+    g = d / np.where(weights == 0, 1.0, weights)[..., None]
+    kernel = next(k for k in mod.manifest["kernels"] if k["name"] == "render_sample")
+    names = [p["name"] for p in kernel["params"]]
+    total = np.zeros(prm.size, np.float64)
+    for (j, rs), out in zip(batches, outs):  # 2. and 3.
+        a = _splat(film, j, out, n, g).astype(np.float32)
+        seeds = {f"a_ret_value_{c}": a[:, i] for i, c in enumerate("xyz"[:a.shape[1]])}
+        if a.shape[1] == 1:
+            seeds = {"a_ret_value": a[:, 0]}
+        args = []
+        grad = np.zeros(j.size * prm.size, np.float32)
+        for name in names[names.index("PRM") + 1:]:
+            if name == "gPRM":
+                args.append(grad)
+            elif name == "ad_row":
+                args.append(j * np.int32(prm.size))
+            else:
+                args.append(seeds.get(name, np.zeros(j.size, np.float32)))
+        mod["render_sample"](j, rs, *scene.buffers.args(), prm, *args, threads=threads)
+        total += grad.reshape(j.size, prm.size).sum(0, dtype=np.float64)
+    return {name: total[s.offset:s.offset + s.size].astype(np.float32)
+            for name, s in chosen.items()}
