@@ -98,17 +98,15 @@ def _splat(film: dict, j: np.ndarray, out: dict, n: int, values: np.ndarray | No
     wx = np.stack([np.asarray(out[f"w{k}"], np.float64) for k in range(m)], 1)
     wy = np.stack([np.asarray(out[f"w{m + k}"], np.float64) for k in range(m)], 1)
     h, w = film["crop_h"], film["crop_w"]
-    ok_x, ok_y = (qx >= 0) & (qx < w), (qy >= 0) & (qy < h)
-    cx, cy = np.clip(qx, 0, w - 1), np.clip(qy, 0, h - 1)
-    acc = 0.0 if values is not None else None
-    for dy in range(m):
-        for dx in range(m):
-            wgt = wx[:, dx] * wy[:, dy] * (ok_x[:, dx] & ok_y[:, dy])
-            if values is None:
-                np.add.at(into, (cy[:, dy], cx[:, dx]), wgt)
-            else:
-                acc = acc + wgt[:, None] * values[cy[:, dy], cx[:, dx]]
-    return into if values is None else acc
+    wx = wx * ((qx >= 0) & (qx < w))  # pixels outside the crop take nothing
+    wy = wy * ((qy >= 0) & (qy < h))
+    pix = np.clip(qy, 0, h - 1)[:, :, None] * w + np.clip(qx, 0, w - 1)[:, None, :]
+    wgt = wy[:, :, None] * wx[:, None, :]  # (samples, rows, columns)
+    if values is None:
+        into += np.bincount(pix.ravel(), wgt.ravel(), h * w).reshape(h, w)
+        return into
+    flat = values.reshape(h * w, -1)
+    return np.einsum("srq,srqc->sc", wgt, flat[pix])
 
 
 # long: two passes over the batches, then the reduction
