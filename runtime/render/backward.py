@@ -80,33 +80,26 @@ def _check(scene: Scene, d_img: Any, params: list[str]) -> tuple[np.ndarray, dic
     return d.reshape(shape), chosen
 
 
-def _pixels(film: dict, j: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
-    """The film columns and rows (crop-relative) that samples ``j`` reach, (samples, m)."""
-    cell = j % (film["grid_w"] * film["grid_h"])
-    gx = cell % film["grid_w"] + film["grid_x"]
-    gy = cell // film["grid_w"] + film["grid_y"]
+def _taps(film: dict, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """Per film cell, the crop-relative pixel index of each of the (2n+1)^2 pixels a
+    sample of the cell reaches (cells, rows, columns), and whether it is in the crop."""
+    cell = np.arange(film["grid_w"] * film["grid_h"])
     k = np.arange(2 * n + 1)
-    return (gx[:, None] - n + k - film["crop_x"], gy[:, None] - n + k - film["crop_y"])
-
-
-def _splat(film: dict, j: np.ndarray, out: dict, n: int, values: np.ndarray | None,
-           into: np.ndarray | None = None) -> np.ndarray:
-    """With ``values`` None: add each sample's weights into ``into`` (crop_h, crop_w);
-    otherwise gather, per sample, sum w * values[pixel] over the pixels it reaches."""
-    m = 2 * n + 1
-    qx, qy = _pixels(film, j, n)
-    wx = np.stack([np.asarray(out[f"w{k}"], np.float64) for k in range(m)], 1)
-    wy = np.stack([np.asarray(out[f"w{m + k}"], np.float64) for k in range(m)], 1)
+    qx = (cell % film["grid_w"] + film["grid_x"] - film["crop_x"])[:, None] - n + k
+    qy = (cell // film["grid_w"] + film["grid_y"] - film["crop_y"])[:, None] - n + k
     h, w = film["crop_h"], film["crop_w"]
-    wx = wx * ((qx >= 0) & (qx < w))  # pixels outside the crop take nothing
-    wy = wy * ((qy >= 0) & (qy < h))
+    ok = ((qy >= 0) & (qy < h))[:, :, None] & ((qx >= 0) & (qx < w))[:, None, :]
     pix = np.clip(qy, 0, h - 1)[:, :, None] * w + np.clip(qx, 0, w - 1)[:, None, :]
-    wgt = wy[:, :, None] * wx[:, None, :]  # (samples, rows, columns)
-    if values is None:
-        into += np.bincount(pix.ravel(), wgt.ravel(), h * w).reshape(h, w)
-        return into
-    flat = values.reshape(h * w, -1)
-    return np.einsum("srq,srqc->sc", wgt, flat[pix])
+    return pix, ok
+
+
+def _weights(out: dict, n: int, cells: int) -> tuple[np.ndarray, np.ndarray]:
+    """The samples' column and row filter weights, (samples per cell, cells, 2n+1) each
+    (a batch is sample-major: sample j is in cell j % cells)."""
+    m = 2 * n + 1
+    wx = np.stack([np.asarray(out[f"w{k}"], np.float32) for k in range(m)], -1)
+    wy = np.stack([np.asarray(out[f"w{m + k}"], np.float32) for k in range(m)], -1)
+    return wx.reshape(-1, cells, m), wy.reshape(-1, cells, m)
 
 
 # long: two passes over the batches, then the reduction
@@ -138,18 +131,24 @@ def backward(scene: Scene, d_img: Any, params: list[str], spp: int | None = None
         j = np.arange(cells * k, dtype=np.int32)
         rs = np.array([done, spp, seed_bits], np.int32)
         batches.append((j, rs))
-    weights = np.zeros((film["crop_h"], film["crop_w"]))
+    pix, ok = _taps(film, n)
+    per_tap = np.zeros(pix.shape)
     outs = []
     for j, rs in batches:  # 1. the film's total weight per pixel
         out = plain["render_sample"](j, rs, *scene.buffers.args(), prm, threads=threads)
-        outs.append(out)
-        _splat(film, j, out, n, None, weights)
+        wx, wy = _weights(out, n, cells)
+        outs.append((wx, wy))
+        per_tap += np.einsum("scr,scq->crq", wy, wx, dtype=np.float64)
+    h, w = film["crop_h"], film["crop_w"]
+    weights = np.bincount(pix[ok], per_tap[ok], h * w).reshape(h, w)
     g = d / np.where(weights == 0, 1.0, weights)[..., None]
+    g_taps = np.where(ok[..., None], g.reshape(h * w, -1)[pix], 0.0)  # (cells, r, q, C)
     kernel = next(k for k in mod.manifest["kernels"] if k["name"] == "render_sample")
     names = [p["name"] for p in kernel["params"]]
     total = np.zeros(prm.size, np.float64)
-    for (j, rs), out in zip(batches, outs):  # 2. and 3.
-        a = _splat(film, j, out, n, g).astype(np.float32)
+    for (j, rs), (wx, wy) in zip(batches, outs):  # 2. and 3.
+        a = np.einsum("scr,scq,crqx->scx", wy, wx, g_taps.astype(np.float32),
+                      optimize=True).reshape(j.size, -1)
         seeds = {f"a_ret_value_{c}": a[:, i] for i, c in enumerate("xyz"[:a.shape[1]])}
         if a.shape[1] == 1:
             seeds = {"a_ret_value": a[:, 0]}
