@@ -52,6 +52,21 @@ def timed(fn) -> float:
     return time.perf_counter() - t
 
 
+def measure(scene, args) -> tuple[dict[str, float], float]:
+    """Median seconds of render, backward and forward-mode gradient; the first backward's."""
+    d = np.random.default_rng(0).standard_normal((args.res, args.res, 3))
+    t0 = timed(lambda: scene.backward(d, NAMES, spp=args.spp, seed=1))  # compiles
+    scene.gradient(NAMES[:1], d, spp=1, seed=1)
+    times: dict[str, list[float]] = {"render": [], "backward": [], "forward": []}
+    for _ in range(args.repeat):
+        times["render"].append(timed(lambda: scene.render(spp=args.spp, seed=1)))
+        times["backward"].append(timed(lambda: scene.backward(d, NAMES, spp=args.spp,
+                                                              seed=1)))
+        times["forward"].append(timed(lambda: scene.gradient(NAMES, d, spp=args.spp,
+                                                             seed=1)))
+    return {k: statistics.median(v) for k, v in times.items()}, t0
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--res", type=int, default=64)
@@ -68,18 +83,7 @@ def main() -> int:
                   f"adjoints of the carried values), {taped} bytes per lane per bounce "
                   f"stored (no tape: the state is recomputed); gradient row: {grad} bytes "
                   "per sample")
-        d = np.random.default_rng(0).standard_normal((args.res, args.res, 3))
-        t0 = timed(lambda: scene.backward(d, NAMES, spp=args.spp, seed=1))  # compiles
-        scene.gradient(NAMES[:1], d, spp=1, seed=1)
-        times: dict[str, list[float]] = {"render": [], "backward": [], "forward": []}
-        for _ in range(args.repeat):
-            times["render"].append(timed(lambda: scene.render(spp=args.spp, seed=1)))
-            times["backward"].append(timed(lambda: scene.backward(d, NAMES, spp=args.spp,
-                                                                  seed=1)))
-            times["forward"].append(timed(lambda: scene.gradient(NAMES, d, spp=args.spp,
-                                                                 seed=1)))
-        med = {k: statistics.median(v) for k, v in times.items()}
-        rows.append((depth, med, t0))
+        rows.append((depth, *measure(scene, args)))
     print(f"{'max_depth':>9} {'render s':>9} {'backward s':>10} {'bwd/render':>10} "
           f"{'fwd-mode s':>10} {'fwd/bwd':>8}")
     for depth, med, _ in rows:

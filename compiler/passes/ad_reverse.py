@@ -290,7 +290,7 @@ class _Reverse:
         rb = Builder(ab, ins.loc)
         state = self._state_at(ins, k, rb)
         self.varied.update(state[i] for i in hot)
-        local, m, defined = self.region(
+        local, _, defined = self.region(
             body, state, {1 + i: a for i, a in zip(hot, ads)}, rb)
         carried = set(state)
         free = [v for v in local if v not in defined and v not in carried]

@@ -24,32 +24,14 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from ...compiler.build import Build
 from ...compiler.diagnostics import CompileError
-from .differentiable import _lookup
+from .differentiable import _lookup, ad_twin
 from .film import film_reach, film_uniforms
 
 if TYPE_CHECKING:
     from .renderer import Scene
 
 __all__ = ["backward"]
-
-
-def _reverse_scene(scene: Scene) -> Scene:
-    """The scene's reverse-mode twin: same description and buffers, a generic build whose
-    kernel also takes the adjoints of its results."""
-    twin = getattr(scene, "_reverse", None)
-    if twin is None or twin.desc is not scene.desc:
-        from .renderer import Scene as SceneClass
-
-        twin = SceneClass.__new__(SceneClass)
-        twin.__dict__.update(scene.__dict__)
-        twin.build = Build(scene.build.target, scene.build.model, "reverse")
-        twin.specialize, twin.derivative, twin._prm_set = False, False, True
-        twin._module = None
-        twin._forward = twin._reverse = None
-        scene._reverse = twin
-    return twin
 
 
 def _check(scene: Scene, d_img: Any, params: list[str]) -> tuple[np.ndarray, dict]:
@@ -113,7 +95,7 @@ def backward(scene: Scene, d_img: Any, params: list[str], spp: int | None = None
     seed = scene.seed if seed is None else int(seed)
     scene.use_generic()
     plain = scene.compile()
-    twin = _reverse_scene(scene)
+    twin = ad_twin(scene, "reverse")
     mod = twin.compile()
     for m in (plain, mod):
         if m.traces_rays:
