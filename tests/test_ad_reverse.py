@@ -171,3 +171,18 @@ def test_cbox_backward_agrees_with_mitsuba_prb():
         noise = np.abs(a[k] - b[k])
         np.testing.assert_array_less(np.abs(ours[k] - (a[k] + b[k]) / 2),
                                      4 * noise + 5e-3 * np.abs(a[k]), err_msg=k)
+
+
+def test_rdsl_ir_prints_the_adjoint(tmp_path):
+    import subprocess
+    import sys
+
+    src = tmp_path / "k.rdsl"
+    src.write_text(LOOP)
+    r = subprocess.run([sys.executable, "-m", "rdsl.cli", "ir", str(src), "--ad", "reverse",
+                        "--print-after", "ad_reverse", "--no-locs"],
+                       capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
+    assert "%a.ret: f32" in r.stdout and "%gPRM: buffer<f32>" in r.stdout
+    assert "%ad.k" in r.stdout  # the adjoint loop
+    assert "store %gPRM" in r.stdout
