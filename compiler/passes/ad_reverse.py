@@ -44,6 +44,7 @@ from ..ir import (
     Param,
     Value,
     clone_block,
+    replace_uses,
 )
 from . import Pass, register
 from .ad_forward import PARAM_BUFFER
@@ -126,13 +127,19 @@ class _Reverse:
             "leaves": [*result.get("leaves", []), *leaves], "vjp": True}
 
     def _lower_ad_ops(self, block: Block) -> None:
-        """derivative(x) -> 0; detach(x) and a rule -> a copy (x - 0) that the sweep treats
-        as a leaf (detach) or through the rule's partials."""
+        """derivative(x) -> 0; detach(x) of a Float and a rule -> a copy (x - 0) that the
+        sweep treats as a leaf (detach) or through the rule's partials; detach of any other
+        type -> x (it has no adjoint anyway)."""
+        out: list[Instr] = []
+        renamed: dict[Value, Value] = {}
         for ins in block.instrs:
             for r in ins.regions:
                 self._lower_ad_ops(r)
             if ins.op is Op.DERIV:
                 ins.op, ins.operands, ins.attrs = Op.CONST, [], {"value": 0.0}
+            elif ins.op is Op.DETACH and ins.operands[0].type != F32:
+                renamed[ins.result] = ins.operands[0]
+                continue
             elif ins.op in (Op.DETACH, Op.AD_RULE):
                 n = (len(ins.operands) - 1) // 2
                 if ins.op is Op.AD_RULE:
@@ -142,9 +149,12 @@ class _Reverse:
                 else:
                     x = ins.operands[0]
                     self.detached.add(ins.result)
-                zero = Instr(Op.CONST, [], [x.type], {"value": 0.0}, loc=ins.loc)
+                zero = Instr(Op.CONST, [], [F32], {"value": 0.0}, loc=ins.loc)
                 ins.op, ins.operands, ins.attrs = Op.SUB, [x, zero.result], {}
-                block.instrs.insert(block.instrs.index(ins), zero)
+                out.append(zero)
+            out.append(ins)
+        block.instrs = out
+        replace_uses(block, renamed)
 
     def _activity(self) -> None:
         """The Float values that depend on a seed (PRM loads, Float arguments); a global
