@@ -17,9 +17,10 @@ parameters and results, computed as before, and gets after its own parameters:
   product), recorded in ``abi_params``/``abi_result`` as ``ad_forward`` records tangents.
 
 The adjoint is the primal function followed by the reverse sweep of its body.  Only *active*
-values (Floats that depend on a seed, not through ``detach``) get adjoints.  An ``if``'s
-adjoint is an ``if`` on the same condition whose branches recompute the branch (forward)
-and sweep it backwards.  A ``loop``'s adjoint stores nothing: the primal loop counts its
+values (Floats that depend on a seed, not through ``detach``) get adjoints.  An ``if`` with
+an active result also yields every value its branches compute (DCE later drops those the
+adjoint does not read); its adjoint is an ``if`` on the same condition whose branches sweep
+the branch backwards, reading those values.  A ``loop``'s adjoint stores nothing: the primal loop counts its
 iterations N, and the adjoint loop runs k = N-1 .. 0, recomputing the carried state of
 iteration k by running the body k times from the initial values, then the body once more
 forward and its sweep (quadratic in N, no tape: docs/ad.md says why).  The adjoints of the
@@ -75,6 +76,8 @@ class _Reverse:
         self.varied: set[Value] = set()
         self.rules: dict[Value, tuple[list[Value], list[Value]]] = {}
         self.detached: set[Value] = set()  # the copies detach(x) made
+        # a value of a branch -> the result of its `if` that exports it, where the sweep is
+        self.sub: dict[Value, Value] = {}
 
     # -- setup ----------------------------------------------------------------------------
     def run(self) -> None:
@@ -84,6 +87,7 @@ class _Reverse:
         self.varied.update(p.value for p in seeds)
         self._activity()
         self._count_loops(fn.body)
+        self._export(fn.body)
         ret = fn.body.instrs.pop()
         assert ret.op is Op.RETURN
         adj: dict[Value, Value] = {}
@@ -115,6 +119,7 @@ class _Reverse:
             self._abi_results(seeds)
         for ins in fn.walk():
             ins.attrs.pop("ad.counted", None)
+            ins.attrs.pop("ad.export", None)
 
     def _abi_results(self, seeds: list[Param]) -> None:
         fn = self.fn
@@ -215,6 +220,36 @@ class _Reverse:
             out.append(ins)
         block.instrs = out
 
+    def _export(self, block: Block) -> None:
+        """Make each ``if`` with an active result also yield every value its branches
+        compute (innermost first, so a branch's exports include its inner ifs'): the
+        adjoint reads them there instead of recomputing the branch.  DCE drops the ones
+        the adjoint does not use.  ``ad.export`` = the number exported per branch."""
+        for ins in block.instrs:
+            for r in ins.regions:
+                self._export(r)
+            if ins.op is not Op.IF or not any(r in self.varied for r in ins.results):
+                continue
+            per = [[v for i in r.instrs[:-1] for v in i.results
+                    if not isinstance(v.type, BufferType)] for r in ins.regions]
+            for k, r in enumerate(ins.regions):
+                y = r.instrs.pop()
+                rb = Builder(r, y.loc)
+                for j, vals in enumerate(per):
+                    y.operands += vals if j == k else [rb.const(_zero(v.type), v.type)
+                                                       for v in vals]
+                r.instrs.append(y)
+            for vals in per:
+                for v in vals:
+                    res = Value(v.type)
+                    res.owner = ins
+                    ins.results.append(res)
+            ins.attrs["ad.export"] = [len(v) for v in per]
+
+    def P(self, v: Value) -> Value:
+        """The value the adjoint reads for primal value ``v`` where it is."""
+        return self.sub.get(v, v)
+
     # -- the reverse sweep ----------------------------------------------------------------
     def acc(self, adj: dict[Value, Value], v: Value, c: Value, b: Builder) -> None:
         """adj[v] += c, for an active v."""
@@ -238,7 +273,8 @@ class _Reverse:
                    ) -> tuple[list[Instr], dict[Value, Value]]:
         """Append a copy of ``block``'s instructions (not its terminator) to ``b``, its
         arguments bound to ``args``; the copies keep the originals' activity."""
-        m: dict[Value, Value] = dict(zip(block.args, args))
+        m: dict[Value, Value] = dict(self.sub)
+        m.update(zip(block.args, args))
         tmp = Block()
         tmp.instrs = block.instrs[:-1]
         new = clone_block(tmp, m).instrs
@@ -270,19 +306,37 @@ class _Reverse:
         seeds = {i: adj.pop(r) for i, r in enumerate(ins.results) if r in adj}
         if not seeds:
             return
+        counts = ins.attrs.get("ad.export", [0, 0])
+        base = len(ins.results) - sum(counts)
         blocks, locals_ = [], []
-        for reg in ins.regions:
+        outer = self.sub
+        for k, reg in enumerate(ins.regions):
             nb = Block()
-            local, _, defined = self.region(reg, [], seeds, Builder(nb, ins.loc))
+            rb = Builder(nb, ins.loc)
+            first = base + sum(counts[:k])
+            y = reg.instrs[-1].operands
+            self.sub = dict(outer)
+            self.sub.update((y[i], outer.get(ins.results[i], ins.results[i]))
+                            for i in range(first, first + counts[k]))
+            for i in reg.instrs[:-1]:  # buffers (tables) are not exported: copies
+                if any(isinstance(v.type, BufferType) for v in i.results):
+                    _, m = self.clone_into(_one(i), [], rb)
+                    self.sub.update(m)
+            local: dict[Value, Value] = {}
+            for i, a in seeds.items():
+                self.acc(local, y[i], a, rb)
+            self.sweep(reg.instrs[:-1], local, rb)
+            defined = {r for i in reg.instrs for r in _defined(i)}
             blocks.append(nb)
             locals_.append({v: a for v, a in local.items() if v not in defined})
+        self.sub = outer
         free = list(dict.fromkeys(v for lo in locals_ for v in lo))
         if not free and not any(i.op is Op.STORE for nb in blocks for i in nb.walk()):
             return  # nothing flows out and no gradient is stored
         for nb, lo in zip(blocks, locals_):
             rb = Builder(nb, ins.loc)
             rb.yield_(*[lo.get(v) or rb.const(0.0, F32) for v in free])
-        new = b.emit(Op.IF, [ins.operands[0]], [F32] * len(free), regions=blocks)
+        new = b.emit(Op.IF, [self.P(ins.operands[0])], [F32] * len(free), regions=blocks)
         for v, r in zip(free, new.results):
             self.acc(adj, v, r, b)
 
@@ -293,7 +347,7 @@ class _Reverse:
         seeds = {i: adj.pop(ins.results[i]) for i in hot if ins.results[i] in adj}
         if not seeds:
             return
-        init, trips = ins.operands, ins.results[-1]
+        init, trips = ins.operands, self.P(ins.results[-1])
         k = Value(I32, "ad.k")
         ads = [Value(F32, f"ad.{body.args[i].name or i}") for i in hot]
         ab = Block([k, *ads])
@@ -320,13 +374,14 @@ class _Reverse:
         res = new.results[1:]
         for i, r in zip(hot, res):
             self.acc(adj, init[i], r, b)
+        back = {v: k for k, v in self.sub.items()}  # exported results -> their values
         for v, r in zip(free, res[len(hot):]):
-            self.acc(adj, v, r, b)
+            self.acc(adj, back.get(v, v), r, b)
 
     def _state_at(self, ins: Instr, k: Value, b: Builder) -> list[Value]:
         """The loop's carried values before iteration ``k`` (0 = the initial values): the
         body run k times from them."""
-        body, init = ins.regions[0], ins.operands
+        body, init = ins.regions[0], [self.P(v) for v in ins.operands]
         types = [a.type for a in body.args]
         then, other = Block(), Block()
         tb = Builder(then, ins.loc)
@@ -347,19 +402,20 @@ class _Reverse:
     # long: one rule per op, as a table would hold them
     def instr(self, ins: Instr, a: Value, adj: dict[Value, Value], b: Builder) -> None:
         """Propagate the adjoint ``a`` of ``ins``'s result to its operands."""
-        op, x, y = ins.op, ins.operands, ins.result
+        op, x, y = ins.op, ins.operands, ins.result  # x, y: the keys of adjoints
+        v, yv = [self.P(o) for o in x], self.P(y)  # and their values where the sweep is
         acc = self.acc
         if y in self.rules:
             xs, ps = self.rules[y]
             for xi, p in zip(xs, ps):
                 if xi in self.varied:
-                    acc(adj, xi, b.op(Op.MUL, F32, a, p), b)
+                    acc(adj, xi, b.op(Op.MUL, F32, a, self.P(p)), b)
             return
         if y in self.detached:
             return
         if op is Op.LOAD:
             if x[0] is self.prm:
-                idx = x[1] if x[1].type == I32 else b.op(Op.CAST, I32, x[1])
+                idx = v[1] if v[1].type == I32 else b.op(Op.CAST, I32, v[1])
                 j = b.op(Op.ADD, I32, self.row, idx)
                 old = b.op(Op.LOAD, F32, self.grad, j)
                 b.emit(Op.STORE, [self.grad, j, b.op(Op.ADD, F32, old, a)], [])
@@ -378,23 +434,23 @@ class _Reverse:
         elif op is Op.MUL:
             for i in (0, 1):
                 if x[i] in self.varied:
-                    acc(adj, x[i], b.op(Op.MUL, F32, a, x[1 - i]), b)
+                    acc(adj, x[i], b.op(Op.MUL, F32, a, v[1 - i]), b)
         elif op is Op.DIV:  # d/da = 1/b, d/db = -y/b
-            q = b.op(Op.DIV, F32, a, x[1])
+            q = b.op(Op.DIV, F32, a, v[1])
             acc(adj, x[0], q, b)
             if x[1] in self.varied:
-                acc(adj, x[1], b.op(Op.NEG, F32, b.op(Op.MUL, F32, q, y)), b)
+                acc(adj, x[1], b.op(Op.NEG, F32, b.op(Op.MUL, F32, q, yv)), b)
         elif op is Op.SQRT:  # a / (2 y), 0 at y = 0
-            q = b.op(Op.DIV, F32, a, b.op(Op.ADD, F32, y, y))
-            acc(adj, x[0], b.op(Op.SELECT, F32, b.op(Op.GT, BOOL, y, zero), q, zero), b)
+            q = b.op(Op.DIV, F32, a, b.op(Op.ADD, F32, yv, yv))
+            acc(adj, x[0], b.op(Op.SELECT, F32, b.op(Op.GT, BOOL, yv, zero), q, zero), b)
         elif op is Op.ABS:
-            neg = b.op(Op.LT, BOOL, x[0], zero)
+            neg = b.op(Op.LT, BOOL, v[0], zero)
             acc(adj, x[0], b.op(Op.SELECT, F32, neg, b.op(Op.NEG, F32, a), a), b)
         elif op in (Op.MIN, Op.MAX, Op.SELECT):
             if op is Op.SELECT:
-                c, pair = x[0], x[1:]
+                c, pair = v[0], x[1:]
             else:
-                c, pair = b.op(Op.LT if op is Op.MIN else Op.GT, BOOL, x[0], x[1]), x
+                c, pair = b.op(Op.LT if op is Op.MIN else Op.GT, BOOL, v[0], v[1]), x
             if pair[0] in self.varied:
                 acc(adj, pair[0], b.op(Op.SELECT, F32, c, a, zero), b)
             if pair[1] in self.varied:
@@ -402,6 +458,17 @@ class _Reverse:
 
 
 _F32_JSON = {"kind": "scalar", "dtype": "f32"}
+
+
+def _zero(t) -> object:
+    return 0.0 if t == F32 else False if t == BOOL else 0
+
+
+def _one(ins: Instr) -> Block:
+    """A block holding ``ins`` and a terminator (for clone_into)."""
+    blk = Block()
+    blk.instrs = [ins, Instr(Op.YIELD, [], [])]
+    return blk
 
 
 def _defined(ins: Instr) -> list[Value]:
