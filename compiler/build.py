@@ -14,7 +14,7 @@ from .diagnostics import CompileError
 from .targets import Target, get_target
 
 
-AD_MODES = (None, "forward")
+AD_MODES = (None, "forward", "reverse")
 
 
 @dataclass(frozen=True)
@@ -23,7 +23,7 @@ class Build:
 
     target: Target
     model: ColorModel
-    # automatic differentiation: None, or "forward" (compiler/passes/ad_forward.py)
+    # automatic differentiation: None, "forward" or "reverse" (compiler/passes/ad_*.py)
     ad: str | None = None
 
     @classmethod
@@ -32,9 +32,9 @@ class Build:
         """The build for a target name (``host`` resolves to this machine's widest) and a
         variant name; a name that is neither raises a diagnostic listing the valid ones.
         ``width`` picks the SIMD width of target ``c`` (see :func:`get_target`); ``ad`` the
-        differentiation mode (None, or "forward": docs/ad.md)."""
+        differentiation mode (None, "forward" or "reverse": docs/ad.md)."""
         if ad not in AD_MODES:
-            raise CompileError(f"unknown differentiation mode `{ad}` (valid: forward)")
+            raise CompileError(f"unknown differentiation mode `{ad}` (valid: forward, reverse)")
         return cls(get_target(target, width), color_model(variant), ad)
 
     @property

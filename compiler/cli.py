@@ -19,7 +19,8 @@ Command = Callable[[argparse.Namespace], int]
 
 _VARIANTS_HELP = ", ".join(VARIANTS) + " (default: rgb)"
 _AD_HELP = ("differentiate: 'forward' gives each kernel with Float arguments a tangent "
-            "argument per argument and a tangent result per Float result (docs/ad.md)")
+            "argument per argument and a tangent result per Float result; 'reverse' an adjoint "
+            "argument per Float result and a gradient result per Float argument (docs/ad.md)")
 _ARCH_HELP = "GPU architecture of target ptx: sm_70 (default), sm_80 or sm_90"
 _WIDTH_HELP = ("SIMD width of target c, or the lanes per work-item of target opencl: 1, 4, "
                "8 or 16 (default: the host's widest); the LLVM targets have their own")
@@ -39,7 +40,7 @@ def add_commands(sub: argparse._SubParsersAction) -> dict[str, Command]:
                    help="print after every run of PASS ('lower' for the frontend's IR, "
                         "'all' for every pass); default: the final IR")
     i.add_argument("--no-locs", action="store_true", help="omit source locations")
-    i.add_argument("--ad", choices=["forward"], default=None, help=_AD_HELP)
+    i.add_argument("--ad", choices=["forward", "reverse"], default=None, help=_AD_HELP)
 
     k = sub.add_parser("compile", help="compile to a shared library, C header and manifest")
     k.add_argument("file")
@@ -57,7 +58,7 @@ def add_commands(sub: argparse._SubParsersAction) -> dict[str, Command]:
     k.add_argument("--emit", choices=["lib", "llvm", "asm", "obj", "c"], default="lib",
                    help="what to produce; llvm/asm go to stdout unless -o is given; "
                         "c (target c): only STEM.c, STEM.h and STEM.json, no cc needed")
-    k.add_argument("--ad", choices=["forward"], default=None, help=_AD_HELP)
+    k.add_argument("--ad", choices=["forward", "reverse"], default=None, help=_AD_HELP)
     return {"check": _check, "ir": _ir, "compile": _compile}
 
 

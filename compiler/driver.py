@@ -19,6 +19,7 @@ from .diagnostics import CompileError
 from .ir import Module
 from .passes import Pass
 from .passes.ad_forward import AdForward
+from .passes.ad_reverse import AdReverse
 from .passes.evaluate import Evaluate, evaluable
 from .passes.inline import Inline
 from .passes.lift import Lift
@@ -48,7 +49,8 @@ def pipeline(build: Build, scene: SceneSpec | None = None,
         Optimize(),  # fold the trait branches away
         Scalarize(),  # aggregates become scalars; kernel ABI recorded
         Optimize(),  # forward extracts, CSE the leaves
-        AdForward(build.ad),  # tangents (forward mode), or derivative() = 0 without AD
+        # tangents (forward mode), adjoints (reverse), or derivative() = 0 without AD
+        AdReverse() if build.ad == "reverse" else AdForward(build.ad),
         Vectorize(build.width),  # SPMD over lanes with masks
         Optimize(),  # CSE broadcasts and masks
     ]

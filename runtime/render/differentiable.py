@@ -123,20 +123,22 @@ def _check_tables(scene: Scene, name: str) -> None:
                                "value (a -D default or the XML)")
 
 
-def _forward_scene(scene: Scene) -> Scene:
-    """The scene's forward-mode twin: same description and buffers, a generic build with
-    tangents, whose film also takes the derivative of the radiance."""
-    twin = getattr(scene, "_forward", None)
+def ad_twin(scene: Scene, ad: str) -> Scene:
+    """The scene's twin for differentiation mode ``ad``: same description and buffers, a
+    generic build with tangents ("forward": its film also takes the derivative of the
+    radiance) or adjoints ("reverse": runtime/render/backward.py)."""
+    attr = f"_{ad}"
+    twin = getattr(scene, attr, None)
     if twin is None or twin.desc is not scene.desc:
         from .renderer import Scene as SceneClass
 
         twin = SceneClass.__new__(SceneClass)
         twin.__dict__.update(scene.__dict__)
-        twin.build = Build(scene.build.target, scene.build.model, "forward")
-        twin.specialize, twin.derivative, twin._prm_set = False, True, True
+        twin.build = Build(scene.build.target, scene.build.model, ad)
+        twin.specialize, twin.derivative, twin._prm_set = False, ad == "forward", True
         twin._module = None
-        twin._forward = None
-        scene._forward = twin
+        twin._forward = twin._reverse = None
+        setattr(scene, attr, twin)
     return twin
 
 
@@ -154,7 +156,7 @@ def render_forward(scene: Scene, name: str, spp: int | None = None, seed: int | 
         np.asarray(tangent, np.float32).reshape(-1)
     if t.size not in (1, slot.size):
         raise ValueError(f"the tangent of `{name}` has {slot.size} value(s); got {t.size}")
-    twin = _forward_scene(scene)
+    twin = ad_twin(scene, "forward")
     twin.compile()
     twin.prm = np.array(scene.prm if scene._prm_set else params.values)
     twin.tangents = np.zeros_like(twin.prm)

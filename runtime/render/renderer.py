@@ -378,6 +378,15 @@ class Scene:
         render per parameter component): runtime/render/differentiable.py."""
         return gradient(self, names, loss_grad, spp, seed)
 
+    def backward(self, d_img: Any, params: list[str], spp: int | None = None,
+                 seed: int | None = None, threads: int | None = None
+                 ) -> dict[str, np.ndarray]:
+        """d loss / d parameter for every name of ``params`` from d loss / d image, by one
+        adjoint render (reverse mode): runtime/render/backward.py."""
+        from .backward import backward
+
+        return backward(self, d_img, params, spp, seed, threads)
+
     def _folding(self, scene: SceneSpec) -> list[str]:
         """What the build folds (specialized) or reads at run time (generic), for the report."""
         _, values = parameter_slots(scene, self.build.model)
