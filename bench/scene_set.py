@@ -25,6 +25,7 @@ import hashlib
 import json
 import math
 import os
+import resource
 import statistics
 import subprocess
 import sys
@@ -122,25 +123,33 @@ def measure(name: str, path: Path, args: argparse.Namespace) -> dict:
             "cached": s.from_cache}
 
 
-def cold_ttfp(path: Path, threads: int, variant: str) -> tuple[float, float]:
-    """Seconds of a cold ``rdsl render --spp 1`` and of a cold Mitsuba 3 first render."""
+def _timed(cmd: list[str], env: dict[str, str]) -> tuple[float, float]:
+    """Wall and CPU seconds (user + system, all threads) of a command."""
+    r0 = resource.getrusage(resource.RUSAGE_CHILDREN)
+    t = time.perf_counter()
+    subprocess.run(cmd, env=env, check=True, capture_output=True)
+    wall = time.perf_counter() - t
+    r1 = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return wall, r1.ru_utime + r1.ru_stime - r0.ru_utime - r0.ru_stime
+
+
+def cold_ttfp(path: Path, threads: int, variant: str) -> dict[str, float]:
+    """Wall and CPU seconds of a cold ``rdsl render --spp 1`` and of a cold Mitsuba 3 first
+    render."""
     with tempfile.TemporaryDirectory() as tmp:
         env = dict(os.environ, RDSL_CACHE_DIR=str(Path(tmp) / "cache"))
         d = [f"-Dres={v}" for v in scene_defaults(path).values()]
         cmd = [sys.executable, "-m", "rdsl.cli", "render", str(path), "--spp", "1", "--quiet",
                "--threads", str(threads), "-o", str(Path(tmp) / "a.exr"), *d]
-        t = time.perf_counter()
-        subprocess.run(cmd, env=env, check=True, capture_output=True)
-        tr = time.perf_counter() - t
+        tr, cr = _timed(cmd, env)
         kw = ", ".join(f"{k}={v}" for k, v in scene_defaults(path).items())
         code = (f"import mitsuba as mi, drjit as dr; mi.set_variant('{variant}')\n"
                 + (f"dr.set_thread_count({threads})\n" if "llvm" in variant else "")
                 + f"s = mi.load_file({str(path)!r}{', ' + kw if kw else ''})\n"
                 "import numpy as np; np.array(mi.render(s, spp=1))\n")
         env = dict(os.environ, HOME=tmp)  # Dr.Jit's kernel cache lives in ~/.drjit
-        t = time.perf_counter()
-        subprocess.run([sys.executable, "-c", code], env=env, check=True, capture_output=True)
-        return tr, time.perf_counter() - t
+        tm, cm = _timed([sys.executable, "-c", code], env)
+    return {"ttfp_rdsl": tr, "ttfp_mitsuba": tm, "ttfp_cpu_rdsl": cr, "ttfp_cpu_mitsuba": cm}
 
 
 def geomean(xs: list[float]) -> float:
@@ -169,13 +178,14 @@ def main() -> None:
     for name in names:
         r = measure(name, scenes[name], args)
         if args.ttfp:
-            r["ttfp_rdsl"], r["ttfp_mitsuba"] = cold_ttfp(scenes[name], args.threads, variant)
+            r.update(cold_ttfp(scenes[name], args.threads, variant))
         rows.append(r)
         line = (f"{name:<26} {r['rdsl_s']:7.3f} {r['mitsuba_s']:7.3f} {r['time_ratio']:6.2f} "
                 f"{r['equal_error']:6.2f} {r['cpu_ratio']:5.2f} {r['pair_min']:5.2f}-{r['pair_max']:<5.2f} "
                 f"{r['rdsl_rmse']:9.5f} {r['mitsuba_rmse']:9.5f}")
         if args.ttfp:
-            line += f"  ttfp {r['ttfp_rdsl']:.2f} s vs {r['ttfp_mitsuba']:.2f} s"
+            line += (f"  ttfp {r['ttfp_rdsl']:.2f} s vs {r['ttfp_mitsuba']:.2f} s "
+                     f"(cpu {r['ttfp_cpu_rdsl']:.2f} s vs {r['ttfp_cpu_mitsuba']:.2f} s)")
         print(line, flush=True)
     print(f"{'geometric mean':<26} {'':>7} {'':>7} "
           f"{geomean([r['time_ratio'] for r in rows]):6.2f} "
