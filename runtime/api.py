@@ -242,12 +242,14 @@ def jit(source_or_path: str | os.PathLike, target: str | Target = "host",
 
     from ..compiler import driver  # only now: a cache hit never imports the compiler
     from ..compiler.backends.clib import build_library
+    from ..core.gcpause import gc_paused
 
     module, _ = driver.compile_kernels(source_or_path, build, **options)
     if not cache:
         tmp = Path(tempfile.mkdtemp(prefix="rdsl-jit-"))
         atexit.register(shutil.rmtree, tmp, True)
-        build_library(module, build.target, tmp, STEM)
+        with gc_paused():
+            build_library(module, build.target, tmp, STEM)
         mod = load(tmp / STEM, compile_seconds=time.perf_counter() - t0)
         mod.source_files = files
         return mod
@@ -258,7 +260,8 @@ def jit(source_or_path: str | os.PathLike, target: str | Target = "host",
         raise CompileError(f"cannot write to the kernel cache `{root}`: {e.strerror or e} "
                            "(set $RDSL_CACHE_DIR)") from None
     try:
-        build_library(module, build.target, tmp, STEM)
+        with gc_paused():  # lowering to LLVM builds as many objects again
+            build_library(module, build.target, tmp, STEM)
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)
         raise
