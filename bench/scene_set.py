@@ -26,6 +26,7 @@ import json
 import math
 import os
 import resource
+import shutil
 import statistics
 import subprocess
 import sys
@@ -40,7 +41,7 @@ sys.path.insert(0, str(ROOT / "bench"))
 sys.path.insert(0, str(ROOT / "bench" / "scenes"))
 os.environ.setdefault("DRJIT_LIBLLVM_PATH", "/usr/lib/x86_64-linux-gnu/libLLVM.so.19.1")
 
-from render_vs_mitsuba import interleaved_medians, rmse  # noqa: E402
+from render_vs_mitsuba import interleaved_medians, rmse
 
 SET = ROOT / "bench" / "scenes" / "set"
 CBOX = ROOT / "examples" / "cbox" / "cbox.xml"
@@ -84,9 +85,8 @@ def mitsuba_render_fn(path: Path, threads: int):
 
 def reference(name: str, path: Path, spp: int, threads: int) -> np.ndarray:
     """Mitsuba 3 at ``spp``, cached by the scene text and spp."""
-    from rdsl.runtime.render.image import read_exr, write_exr
-
     import mitsuba as mi
+    from rdsl.runtime.render.image import read_exr, write_exr
 
     key = hashlib.sha256(path.read_bytes() + f"{spp}{mi.variant()}".encode()).hexdigest()[:12]
     file = OUT / "ref" / f"{name}_{key}.exr"
@@ -134,14 +134,20 @@ def _timed(cmd: list[str], env: dict[str, str]) -> tuple[float, float]:
 
 
 def cold_ttfp(path: Path, threads: int, variant: str) -> dict[str, float]:
-    """Wall and CPU seconds of a cold ``rdsl render --spp 1`` and of a cold Mitsuba 3 first
-    render."""
+    """Wall and CPU seconds of a cold ``rdsl render --spp 1`` (empty cache), of the same
+    with only the parsed-source cache kept (a new scene of a user who rendered before: the
+    stdlib is parsed, no kernel is cached), and of a cold Mitsuba 3 first render."""
     with tempfile.TemporaryDirectory() as tmp:
-        env = dict(os.environ, RDSL_CACHE_DIR=str(Path(tmp) / "cache"))
+        cache = Path(tmp) / "cache"
+        env = dict(os.environ, RDSL_CACHE_DIR=str(cache))
         d = [f"-Dres={v}" for v in scene_defaults(path).values()]
         cmd = [sys.executable, "-m", "rdsl.cli", "render", str(path), "--spp", "1", "--quiet",
                "--threads", str(threads), "-o", str(Path(tmp) / "a.exr"), *d]
         tr, cr = _timed(cmd, env)
+        for entry in cache.iterdir():
+            if entry.name != "ast":
+                shutil.rmtree(entry)
+        tn, cn = _timed(cmd, env)
         kw = ", ".join(f"{k}={v}" for k, v in scene_defaults(path).items())
         code = (f"import mitsuba as mi, drjit as dr; mi.set_variant('{variant}')\n"
                 + (f"dr.set_thread_count({threads})\n" if "llvm" in variant else "")
@@ -149,7 +155,8 @@ def cold_ttfp(path: Path, threads: int, variant: str) -> dict[str, float]:
                 "import numpy as np; np.array(mi.render(s, spp=1))\n")
         env = dict(os.environ, HOME=tmp)  # Dr.Jit's kernel cache lives in ~/.drjit
         tm, cm = _timed([sys.executable, "-c", code], env)
-    return {"ttfp_rdsl": tr, "ttfp_mitsuba": tm, "ttfp_cpu_rdsl": cr, "ttfp_cpu_mitsuba": cm}
+    return {"ttfp_rdsl": tr, "ttfp_mitsuba": tm, "ttfp_cpu_rdsl": cr, "ttfp_cpu_mitsuba": cm,
+            "ttfp_new_rdsl": tn, "ttfp_new_cpu_rdsl": cn}
 
 
 def geomean(xs: list[float]) -> float:
@@ -164,6 +171,7 @@ def main() -> None:
     ap.add_argument("--ref-spp", type=int, default=1024)
     ap.add_argument("--threads", type=int, default=os.cpu_count() or 1)
     ap.add_argument("--ttfp", action="store_true", help="also the cold time to first pixel")
+    ap.add_argument("--ttfp-only", action="store_true", help="only the time to first pixel")
     ap.add_argument("--json", type=Path, default=OUT / "run.json")
     args = ap.parse_args()
     scenes = all_scenes()
@@ -171,31 +179,53 @@ def main() -> None:
     variant = mitsuba_variant()
     print(f"Mitsuba 3 {variant}; {args.spp} spp, median of {args.repeat} alternated runs, "
           f"{args.threads} threads; RMSE against Mitsuba at {args.ref_spp} spp", flush=True)
-    head = (f"{'scene':<26} {'rdsl s':>7} {'mi s':>7} {'time':>6} {'eq-err':>6} {'cpu':>5} "
-            f"{'pairs':>11} {'rmse rdsl':>9} {'rmse mi':>9}")
+    print(f"{'scene':<26} {'rdsl s':>7} {'mi s':>7} {'time':>6} {'eq-err':>6} {'cpu':>5} "
+          f"{'pairs':>11} {'rmse rdsl':>9} {'rmse mi':>9}")
     rows = []
-    print(head)
     for name in names:
-        r = measure(name, scenes[name], args)
-        if args.ttfp:
+        r = {"scene": name} if args.ttfp_only else measure(name, scenes[name], args)
+        if args.ttfp or args.ttfp_only:
             r.update(cold_ttfp(scenes[name], args.threads, variant))
         rows.append(r)
-        line = (f"{name:<26} {r['rdsl_s']:7.3f} {r['mitsuba_s']:7.3f} {r['time_ratio']:6.2f} "
-                f"{r['equal_error']:6.2f} {r['cpu_ratio']:5.2f} {r['pair_min']:5.2f}-{r['pair_max']:<5.2f} "
-                f"{r['rdsl_rmse']:9.5f} {r['mitsuba_rmse']:9.5f}")
-        if args.ttfp:
-            line += (f"  ttfp {r['ttfp_rdsl']:.2f} s vs {r['ttfp_mitsuba']:.2f} s "
-                     f"(cpu {r['ttfp_cpu_rdsl']:.2f} s vs {r['ttfp_cpu_mitsuba']:.2f} s)")
-        print(line, flush=True)
-    print(f"{'geometric mean':<26} {'':>7} {'':>7} "
-          f"{geomean([r['time_ratio'] for r in rows]):6.2f} "
-          f"{geomean([r['equal_error'] for r in rows]):6.2f}")
-    print("time = rdsl s / Mitsuba s at the same spp; eq-err = ratio of times to equal RMSE; "
-          "cpu = ratio of CPU seconds; pairs = the lowest and highest ratio of one rdsl run to "
-          "the Mitsuba run beside it (the noise)")
+        print(_line(r), flush=True)
+    _summary(rows)
     args.json.parent.mkdir(parents=True, exist_ok=True)
     args.json.write_text(json.dumps({"variant": variant, "spp": args.spp, "rows": rows},
                                     indent=1))
+
+
+def _line(r: dict) -> str:
+    line = f"{r['scene']:<26}"
+    if "rdsl_s" in r:
+        line += (f" {r['rdsl_s']:7.3f} {r['mitsuba_s']:7.3f} {r['time_ratio']:6.2f} "
+                 f"{r['equal_error']:6.2f} {r['cpu_ratio']:5.2f} "
+                 f"{r['pair_min']:5.2f}-{r['pair_max']:<5.2f} "
+                 f"{r['rdsl_rmse']:9.5f} {r['mitsuba_rmse']:9.5f}")
+    if "ttfp_rdsl" in r:
+        line += (f"  ttfp {r['ttfp_rdsl']:.2f} s (new scene {r['ttfp_new_rdsl']:.2f} s) vs "
+                 f"{r['ttfp_mitsuba']:.2f} s; cpu {r['ttfp_cpu_rdsl']:.2f} s "
+                 f"({r['ttfp_new_cpu_rdsl']:.2f} s) vs {r['ttfp_cpu_mitsuba']:.2f} s")
+    return line
+
+
+def _summary(rows: list[dict]) -> None:
+    if "rdsl_s" in rows[0]:
+        print(f"{'geometric mean':<26} {'':>7} {'':>7} "
+              f"{geomean([r['time_ratio'] for r in rows]):6.2f} "
+              f"{geomean([r['equal_error'] for r in rows]):6.2f}")
+    if "ttfp_rdsl" in rows[0]:
+        ratio = {k: geomean([r[f"ttfp_{k}rdsl"] / r["ttfp_mitsuba"] for r in rows])
+                 for k in ("", "new_")}
+        cpu = {k: geomean([r[f"ttfp_{k}rdsl"] / r["ttfp_cpu_mitsuba"] for r in rows])
+               for k in ("cpu_", "new_cpu_")}
+        print(f"time to first pixel, rdsl / Mitsuba (geometric mean): cold {ratio['']:.2f} "
+              f"(cpu {cpu['cpu_']:.2f}), new scene {ratio['new_']:.2f} "
+              f"(cpu {cpu['new_cpu_']:.2f})")
+    print("time = rdsl s / Mitsuba s at the same spp; eq-err = ratio of times to equal RMSE; "
+          "cpu = ratio of CPU seconds; pairs = the lowest and highest ratio of one rdsl run to "
+          "the Mitsuba run beside it (the noise); ttfp: a whole `rdsl render --spp 1` with an "
+          "empty cache (new scene: only the parsed stdlib cached) against a fresh Python "
+          "process's Mitsuba 3 first render with an empty Dr.Jit cache")
 
 
 if __name__ == "__main__":

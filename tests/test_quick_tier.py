@@ -5,7 +5,6 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-
 import rdsl
 from rdsl.runtime.render.renderer import QUICK_SAMPLES
 

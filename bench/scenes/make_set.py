@@ -10,7 +10,6 @@ textures (checkerboard and bitmap); a ~100k-triangle PLY; the Cornell box.
 
 from __future__ import annotations
 
-import struct
 from pathlib import Path
 
 import numpy as np
