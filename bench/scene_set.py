@@ -119,7 +119,8 @@ def measure(name: str, path: Path, args: argparse.Namespace) -> dict:
     er, em = rmse(ir, ref), rmse(im, ref)
     return {"scene": name, "rdsl_s": tr, "mitsuba_s": tm, "rdsl_rmse": er, "mitsuba_rmse": em,
             "time_ratio": tr / tm, "equal_error": tr * er * er / (tm * em * em),
-            "cpu_ratio": cr / cm, "pair_min": min(pairs), "pair_max": max(pairs), "compile_s": compile_s,
+            "cpu_ratio": cr / cm, "pair_min": min(pairs), "pair_max": max(pairs),
+            "compile_s": compile_s,
             "cached": s.from_cache}
 
 

@@ -100,7 +100,8 @@ def veach() -> str:
         tilt = round(float(np.degrees(np.arctan2(-h[1], h[2]))), 2)
         plates.append(f"""    <shape type="rectangle">
         <transform name="to_world">
-            <scale x="1.6" y="0.25"/><rotate x="1" angle="{tilt}"/><translate y="{y:.3f}" z="{z:.3f}"/>
+            <scale x="1.6" y="0.25"/><rotate x="1" angle="{tilt}"/>
+            <translate y="{y:.3f}" z="{z:.3f}"/>
         </transform>
         <bsdf type="roughconductor"><string name="material" value="Ag"/>
             <float name="alpha" value="{alpha}"/></bsdf>

@@ -302,7 +302,8 @@ class Scene:
         or loaded already; without it, quick kernels loaded before are replaced."""
         from ...runtime.api import jit, jit_cached
 
-        if self._module is not None and not again and (quick or not getattr(self._module, "quick", False)):
+        loaded_quick = getattr(self._module, "quick", False)  # a PTX module has no tiers
+        if self._module is not None and not again and (quick or not loaded_quick):
             return self._module
         src, scene, filename = self._kernel_inputs()
         kw = {"build": self.build, "scene": scene, "search_paths": self.search_paths,
