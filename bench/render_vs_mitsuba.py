@@ -37,12 +37,14 @@ def reference_for(scene: Path) -> Path | None:
     return None
 
 
-def interleaved_medians(fns: dict[str, Callable[[int], np.ndarray]], repeat: int
+def interleaved_medians(fns: dict[str, Callable[[int], np.ndarray]], repeat: int,
+                        runs: dict[str, list[float]] | None = None
                         ) -> dict[str, tuple[float, float, np.ndarray]]:
     """Median wall seconds, median CPU seconds (all the process's threads) and the last image
     of each renderer in ``fns``, after a warm-up (compilation, caches, page faults).  The
     renderers take turns, one run each per repeat, so a change in the machine's load (it is
-    shared) hits them alike; CPU seconds hardly change with the load at all."""
+    shared) hits them alike; CPU seconds hardly change with the load at all.  ``runs``, if
+    given, receives each renderer's wall seconds run by run."""
     imgs = {name: fn(0) for name, fn in fns.items()}
     times: dict[str, list[float]] = {name: [] for name in fns}
     cpus: dict[str, list[float]] = {name: [] for name in fns}
@@ -52,6 +54,8 @@ def interleaved_medians(fns: dict[str, Callable[[int], np.ndarray]], repeat: int
             imgs[name] = fn(k + 1)
             times[name].append(time.perf_counter() - t)
             cpus[name].append(time.process_time() - c)
+    if runs is not None:
+        runs.update(times)
     return {name: (statistics.median(times[name]), statistics.median(cpus[name]), imgs[name])
             for name in fns}
 

@@ -13,6 +13,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import TextIO
 
+from ..core.gcpause import gc_paused
 from ..core.scene_spec import SceneSpec
 from .build import Build
 from .diagnostics import CompileError
@@ -120,7 +121,8 @@ def compile_kernels(source_or_path: str | Path, build: Build, filename: str | No
     files it was built from (for cache keys).  ``scene`` specializes the scene
     placeholders (see :mod:`rdsl.compiler.passes.specialize`); ``report`` collects what
     specialization did; ``search_paths`` are the frontend's (see :func:`frontend`)."""
-    module = frontend(source_or_path, filename, search_paths)
-    run_passes(module, pipeline(build, scene, report), verify=verify_mode())
+    with gc_paused():
+        module = frontend(source_or_path, filename, search_paths)
+        run_passes(module, pipeline(build, scene, report), verify=verify_mode())
     module.attrs["target"] = build.target.name
     return module, source_files(source_or_path, search_paths or (), filename=filename)

@@ -2,7 +2,11 @@
 
 from __future__ import annotations
 
+import hashlib
+import os
+import pickle
 from collections.abc import Iterator
+from contextlib import suppress
 from functools import lru_cache
 from pathlib import Path
 from typing import Any
@@ -20,6 +24,7 @@ from lark.lark import PostLex
 
 from ..compiler.diagnostics import CompileError, Diagnostic, register_source
 from ..compiler.ir import Loc
+from ..core.cachedir import cache_dir, compiler_fingerprint
 from . import ast as A
 
 _GRAMMAR = Path(__file__).with_name("grammar.lark")
@@ -56,9 +61,6 @@ class _Remember(PostLex):
 
 
 _POSTLEX = _Remember()
-# Parse trees of recently parsed files (the stdlib prelude is parsed for every program);
-# the transformer below never mutates a tree, so a fresh AST is built from it each time.
-_TREES: dict[tuple[str, str], Any] = {}
 
 
 @lru_cache(maxsize=1)
@@ -68,20 +70,77 @@ def _lark() -> Lark:
 
 
 def parse(source: str, filename: str) -> A.Program:
-    """Parse ``source`` (the text of ``filename``) into an :class:`ast.Program`."""
+    """Parse ``source`` (the text of ``filename``) into an :class:`ast.Program`; a program
+    parsed before (in this process or, through the cache on disk, in another) is read back
+    rather than parsed again: every scene's compile parses the same stdlib files."""
     register_source(filename, source)
+    key = _ast_key(source, filename)
+    blob = _ASTS.get(key) or _read_cached(key)
+    if blob is not None:
+        with suppress(Exception):  # a damaged entry: parse again
+            return pickle.loads(blob)  # a fresh copy: the checker annotates its AST
+    program = _parse(source, filename)
+    try:
+        blob = pickle.dumps(program, protocol=pickle.HIGHEST_PROTOCOL)
+    except Exception:  # noqa: BLE001 - not picklable: just not cached  # pragma: no cover
+        return program
+    if len(_ASTS) > 128:
+        _ASTS.pop(next(iter(_ASTS)))
+    _ASTS[key] = blob
+    _write_cached(key, blob)
+    return program
+
+
+# Pickled ASTs by key, in this process; on disk under <cache>/ast/
+_ASTS: dict[str, bytes] = {}
+
+
+@lru_cache(maxsize=1)
+def _grammar_hash() -> str:
+    """What the ASTs depend on besides the text: the compiler's code (the grammar, this
+    file, the AST's classes...) and lark's version."""
+    from lark import __version__ as lark_version
+
+    return hashlib.sha256(f"{compiler_fingerprint()}:{lark_version}".encode()).hexdigest()
+
+
+def _ast_key(source: str, filename: str) -> str:
+    h = hashlib.sha256(_grammar_hash().encode())
+    for part in (filename, source):  # Locs hold the file name
+        b = part.encode()
+        h.update(f"{len(b)}:".encode())
+        h.update(b)
+    return h.hexdigest()
+
+
+def _read_cached(key: str) -> bytes | None:
+    try:
+        return (cache_dir() / "ast" / f"{key}.pickle").read_bytes()
+    except OSError:
+        return None
+
+
+def _write_cached(key: str, blob: bytes) -> None:
+    """Atomically, and silently not when the cache cannot be written."""
+    folder = cache_dir() / "ast"
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+        tmp = folder / f".{key}.{os.getpid()}.tmp"
+        tmp.write_bytes(blob)
+        os.replace(tmp, folder / f"{key}.pickle")
+    except OSError:
+        pass
+
+
+def _parse(source: str, filename: str) -> A.Program:
+    """``source`` parsed by lark and turned into an AST."""
     parser = _lark()
-    tree = _TREES.get((filename, source))
-    if tree is None:
-        try:
-            tree = parser.parse(source)
-        except UnexpectedInput as e:
-            raise _syntax_error(e, filename, source, parser) from None
-        except LarkError as e:  # pragma: no cover - defensive
-            raise CompileError(f"syntax error: {e}", Loc(filename, 1, 1)) from None
-        if len(_TREES) > 512:
-            _TREES.pop(next(iter(_TREES)))
-        _TREES[(filename, source)] = tree
+    try:
+        tree = parser.parse(source)
+    except UnexpectedInput as e:
+        raise _syntax_error(e, filename, source, parser) from None
+    except LarkError as e:  # pragma: no cover - defensive
+        raise CompileError(f"syntax error: {e}", Loc(filename, 1, 1)) from None
     try:
         return _ToAst(filename).transform(tree)
     except VisitError as e:

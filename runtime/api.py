@@ -79,6 +79,7 @@ class Module:
         # the .rdsl files the kernels were compiled from (set by jit: what its cache key
         # hashes), which `rdsl render --watch` watches
         self.source_files: list[Path] = []
+        self.quick = False  # built by the quick tier (jit(quick=True))
         self._lib = lib
         self.kernels: dict[str, Kernel] = {k["name"]: self._make_kernel(k, lib)
                                            for k in manifest["kernels"]}
@@ -210,6 +211,30 @@ def _source_text(source_or_path: str | os.PathLike) -> str:
     return read_source(source_or_path)[0]
 
 
+def _key(source_or_path: str | os.PathLike, build: Build, options: dict[str, Any],
+         quick: bool) -> tuple[str, list[Path]]:
+    """The cache key of a :func:`jit` compilation, and the source files it reads."""
+    from ..compiler.sources import source_files
+
+    text = _source_text(source_or_path)
+    files = [Path(f) for f in source_files(source_or_path, options.get("search_paths") or (),
+                                           filename=options.get("filename"))]
+    # the file name only labels diagnostics, and a cached build had none: scenes copied to
+    # another directory share their kernels; the search paths count through the files they
+    # resolved (their paths and texts are keyed)
+    keyed = {k: v for k, v in options.items() if k not in ("filename", "search_paths")}
+    if quick:  # the full tier's key is the one it always had
+        keyed["quick"] = True
+    return cache_key(text, files, build, keyed), files
+
+
+def jit_cached(source_or_path: str | os.PathLike, build: Build, **options: Any) -> bool:
+    """Whether :func:`jit` would load these kernels from the cache (``quick=True``: the
+    quick tier's) without compiling."""
+    quick = bool(options.pop("quick", False))
+    return entry_complete(cache_dir() / _key(source_or_path, build, options, quick)[0])
+
+
 def jit(source_or_path: str | os.PathLike, target: str | Target = "host",
         variant: str | ColorModel = "rgb", cache: bool = True, *, build: Build | None = None,
         width: int | None = None, **options: Any) -> Module:
@@ -222,41 +247,37 @@ def jit(source_or_path: str | os.PathLike, target: str | Target = "host",
     :func:`rdsl.runtime.cache.cache_dir`; a second call with the same sources (imports
     included), target, variant and options loads it without compiling.  ``options`` are
     passed on to ``rdsl.compiler.driver.compile_kernels`` (``search_paths``: folders imports
-    are looked up in, such as a scene's user plugin folders)."""
+    are looked up in, such as a scene's user plugin folders).  ``quick=True`` builds the
+    quick tier (LLVM O0: compiled sooner, runs slower, the same results; cached apart)."""
     from ..compiler.build import Build
-    from ..compiler.sources import source_files
 
     t0 = time.perf_counter()
     build = build or Build.of(target, variant, width)
+    quick = bool(options.pop("quick", False))
     if build.target.backend == "ptx":  # kernels on a CUDA GPU, not a CPU library
         from .cuda import jit_ptx
 
         return jit_ptx(source_or_path, build, **options)
-    text = _source_text(source_or_path)
-    files = [Path(f) for f in source_files(source_or_path, options.get("search_paths") or (),
-                                           filename=options.get("filename"))]
-    # the file name only labels diagnostics, and a cached build had none: scenes copied to
-    # another directory share their kernels; the search paths count through the files they
-    # resolved (their paths and texts are keyed)
-    keyed = {k: v for k, v in options.items() if k not in ("filename", "search_paths")}
-    key = cache_key(text, files, build, keyed)
+    key, files = _key(source_or_path, build, options, quick)
     root = cache_dir()
     entry = root / key
     if cache and entry_complete(entry):
         mod = load(entry / STEM, from_cache=True, compile_seconds=time.perf_counter() - t0)
-        mod.source_files = files
+        mod.source_files, mod.quick = files, quick
         return mod
 
     from ..compiler import driver  # only now: a cache hit never imports the compiler
     from ..compiler.backends.clib import build_library
+    from ..core.gcpause import gc_paused
 
     module, _ = driver.compile_kernels(source_or_path, build, **options)
     if not cache:
         tmp = Path(tempfile.mkdtemp(prefix="rdsl-jit-"))
         atexit.register(shutil.rmtree, tmp, True)
-        build_library(module, build.target, tmp, STEM)
+        with gc_paused():
+            build_library(module, build.target, tmp, STEM, quick)
         mod = load(tmp / STEM, compile_seconds=time.perf_counter() - t0)
-        mod.source_files = files
+        mod.source_files, mod.quick = files, quick
         return mod
     try:
         root.mkdir(parents=True, exist_ok=True)
@@ -265,7 +286,8 @@ def jit(source_or_path: str | os.PathLike, target: str | Target = "host",
         raise CompileError(f"cannot write to the kernel cache `{root}`: {e.strerror or e} "
                            "(set $RDSL_CACHE_DIR)") from None
     try:
-        build_library(module, build.target, tmp, STEM)
+        with gc_paused():  # lowering to LLVM builds as many objects again
+            build_library(module, build.target, tmp, STEM, quick)
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)
         raise
@@ -285,5 +307,5 @@ def jit(source_or_path: str | os.PathLike, target: str | Target = "host",
             else:
                 entry = tmp
     mod = load(entry / STEM, compile_seconds=time.perf_counter() - t0)
-    mod.source_files = files
+    mod.source_files, mod.quick = files, quick
     return mod

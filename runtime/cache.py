@@ -10,36 +10,17 @@ import hashlib
 import json
 import os
 from collections.abc import Iterable
-from functools import lru_cache
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
+
+from ..core.cachedir import cache_dir, compiler_fingerprint
+
+__all__ = ["STEM", "cache_dir", "cache_key", "compiler_fingerprint", "entry_complete"]
 
 if TYPE_CHECKING:
     from ..compiler.build import Build
 
 STEM = "kernels"  # file names inside a cache entry: kernels.so, kernels.h, kernels.json
-
-
-def cache_dir() -> Path:
-    """The root of the kernel cache."""
-    env = os.environ.get("RDSL_CACHE_DIR")
-    if env:
-        return Path(env).expanduser()
-    return Path.home() / ".cache" / "rdsl"
-
-
-@lru_cache(maxsize=1)
-def compiler_fingerprint() -> str:
-    """A hash of the compiler's Python sources and grammar, so a changed compiler misses
-    (``core`` included: ``lift`` builds its types and tables with it)."""
-    root = Path(__file__).resolve().parent.parent
-    h = hashlib.sha256()
-    files = [p for sub in ("compiler", "dsl", "core") for p in sorted((root / sub).rglob("*"))
-             if p.suffix in (".py", ".lark") and p.is_file()]
-    for p in files:
-        h.update(str(p.relative_to(root)).encode())
-        h.update(p.read_bytes())
-    return h.hexdigest()
 
 
 def cache_key(source_text: str, files: Iterable[os.PathLike | str], build: Build,

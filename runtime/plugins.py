@@ -118,9 +118,11 @@ def _checked(path: Path, kind: str, name: str, line: int, mtime: int
     """The params and functions (parameter and result types) of plugin ``name`` of
     ``path``, which the compiler's frontend checks (its diagnostics point into the file).
     ``mtime`` keys the cache, so an edited file is read again."""
+    from ..core.gcpause import gc_paused
     from ..dsl import check
 
-    prog = check(path)
+    with gc_paused():
+        prog = check(path)
     for pl in prog.plugins:
         if pl.name == name and pl.module.key == str(path):
             fns = {n: (tuple(f.param_types), f.ret) for n, f in pl.fns.items()}

@@ -174,9 +174,10 @@ def writable_dir(out_dir: str | os.PathLike) -> Path:
 
 
 def build_library(module: ir.Module, target: Target | str, out_dir: str | os.PathLike,
-                  stem: str) -> dict[str, Path]:
+                  stem: str, quick: bool = False) -> dict[str, Path]:
     """Write ``<stem>.so``, ``<stem>.h`` and ``<stem>.json`` into ``out_dir`` (and
-    ``<stem>.c`` for target ``c``, whose library ``cc`` compiles from it).
+    ``<stem>.c`` for target ``c``, whose library ``cc`` compiles from it); ``quick``: the
+    LLVM backend's quick tier (:func:`rdsl.compiler.backends.llvm.emit_object`).
 
     Returns ``{"so": path, "header": path, "manifest": path}``."""
     t = get_target(target)
@@ -198,7 +199,7 @@ def build_library(module: ir.Module, target: Target | str, out_dir: str | os.Pat
     for p in paths.values():
         if p.exists() and not p.is_file():
             raise CompileError(f"cannot write `{p}`: it exists and is not a regular file")
-    obj = emit_object(module, t)
+    obj = emit_object(module, t, quick)
     extra: list[str] = []
     if uses_embree(module):
         extra = link_args()

@@ -160,20 +160,23 @@ def _binding(all_targets: bool = False):
     return llvm
 
 
-def target_machine(target: Target | str):
-    """An llvmlite TargetMachine for ``target`` (position independent, O3)."""
+def target_machine(target: Target | str, quick: bool = False):
+    """An llvmlite TargetMachine for ``target`` (position independent, O3; ``quick``: O0,
+    LLVM's fast instruction selection)."""
     t = get_target(target)
     llvm = _binding(t.backend != "llvm")
     tgt = llvm.Target.from_triple(t.triple)
-    return tgt.create_target_machine(cpu=t.cpu, features=t.features, opt=3,
+    return tgt.create_target_machine(cpu=t.cpu, features=t.features, opt=0 if quick else 3,
                                      reloc="pic" if t.backend == "llvm" else "default",
                                      codemodel="default")
 
 
-def optimized_module(module: ir.Module, target: Target | str, speed: int = 3):
+def optimized_module(module: ir.Module, target: Target | str, speed: int = 3,
+                     quick: bool = False):
     """Lower, verify and optimize with LLVM's O``speed`` pipeline (O3 for kernels; the
     run-once table kernels of compiler/precompute.py take less); return the binding
-    ModuleRef and the target machine."""
+    ModuleRef and the target machine.  ``quick``: the quick tier, O0 and fast instruction
+    selection (see :func:`emit_object`)."""
     t = get_target(target)
     llvm = _binding()
     text = str(lower_module(module, t))
@@ -183,10 +186,10 @@ def optimized_module(module: ir.Module, target: Target | str, speed: int = 3):
     except RuntimeError as e:  # an internal error: show the IR we produced
         raise CompileError(f"internal error: the LLVM backend produced invalid IR: {e}\n"
                            + text) from None
-    tm = target_machine(t)
+    tm = target_machine(t, quick)
     mod.triple = t.triple
     mod.data_layout = str(tm.target_data)
-    pto = llvm.PipelineTuningOptions(speed_level=speed)
+    pto = llvm.PipelineTuningOptions(speed_level=0 if quick else speed)
     # our vectorization is explicit: keep LLVM from re-vectorizing the lane loops (and keep
     # the scalar target scalar, so that speedups measure our vectorizer)
     pto.loop_vectorization = False
@@ -208,9 +211,13 @@ def emit_asm(module: ir.Module, target: Target | str = "host") -> str:
     return tm.emit_assembly(mod)
 
 
-def emit_object(module: ir.Module, target: Target | str = "host") -> bytes:
-    """An ELF object file for ``target``."""
-    mod, tm = optimized_module(module, target)
+def emit_object(module: ir.Module, target: Target | str = "host", quick: bool = False
+                ) -> bytes:
+    """An ELF object file for ``target``.  ``quick``: the quick tier, LLVM's O0 pipeline and
+    fast instruction selection.  The IR arrives optimized by rdsl's own passes, so this
+    compiles in about 60% of the time of O3 and the kernels run 15-30% slower, with results
+    bit for bit the same (neither tier uses fast-math): docs/bench.md."""
+    mod, tm = optimized_module(module, target, quick=quick)
     return tm.emit_object(mod)
 
 

@@ -100,12 +100,13 @@ def render_command(args: Any) -> int:
     if not scene.buffers.nlight and lit:
         print(f"{scene_path}: warning: the scene has no emitters; the image will be black",
               file=sys.stderr)
-    mod = scene.compile()
+    spp = args.spp or scene.spp
+    mod = scene.compile(quick=scene.quick_fits(spp))
     how = "kernels from cache" if scene.from_cache else \
         f"compiled in {scene.compile_seconds:.2f} s"
+    how += " (quick tier)" if getattr(mod, "quick", False) else ""
     if args.report:
         _print_report(scene, mod)
-    spp = args.spp or scene.spp
     t1 = time.perf_counter()
     img = scene.render(spp=spp, seed=args.seed, threads=args.threads,
                        progress=not args.quiet)
@@ -137,5 +138,7 @@ def _print_report(scene: Any, mod: Any) -> None:
     print(f"render_sample: {spec} instructions specialized, {generic} generic "
           f"({100 * (spec - generic) / generic:+.0f}%)")
     k = mod.manifest["kernels"]
+    tier = ("quick tier: LLVM O0, for a small render not cached yet"
+            if getattr(mod, "quick", False) else "full tier: LLVM O3")
     print(f"kernels: {', '.join(x['name'] for x in k)} for `{mod.target}` "
-          f"(width {mod.width}, variant {scene.build.model.name})")
+          f"(width {mod.width}, variant {scene.build.model.name}), {tier}")

@@ -56,6 +56,10 @@ from .textures import TextureTable
 ACCELS = ("embree", "bvh")  # how rays are traced (`--accel`)
 # samples per kernel call: small enough that a batch's sample buffers stay in cache
 BATCH_SAMPLES = 1 << 17
+# renders of at most this many samples, whose kernels are not in the cache yet, compile the
+# quick tier (LLVM O0): it saves about 40% of a cold compile, more than its slower kernels
+# (15-30%) lose on a render of this size (docs/bench.md)
+QUICK_SAMPLES = 1 << 21
 
 
 class RenderCancelled(Exception):
@@ -291,17 +295,21 @@ class Scene:
         self.from_cache = False
         self.nonfinite = 0
 
-    def compile(self, again: bool = False):
+    def compile(self, again: bool = False, quick: bool = False):
         """Compile (or load from the cache) the scene's kernels; ``again``: even if they
-        were (a source they import changed: the cache key tells whether it did)."""
-        from ...runtime.api import jit
+        were (a source they import changed: the cache key tells whether it did).  ``quick``:
+        the quick tier will do (:func:`rdsl.runtime.api.jit`), unless the full one is cached
+        or loaded already; without it, quick kernels loaded before are replaced."""
+        from ...runtime.api import jit, jit_cached
 
-        if self._module is not None and not again:
+        loaded_quick = getattr(self._module, "quick", False)  # a PTX module has no tiers
+        if self._module is not None and not again and (quick or not loaded_quick):
             return self._module
         src, scene, filename = self._kernel_inputs()
+        kw = {"build": self.build, "scene": scene, "search_paths": self.search_paths,
+              "filename": filename}
         try:
-            mod = jit(src, build=self.build, scene=scene, search_paths=self.search_paths,
-                      filename=filename)
+            mod = jit(src, quick=quick and not jit_cached(src, **kw), **kw)
         except NoRayTracer:  # one line: what is missing, not the integrator's source
             raise CompileError(_no_ray_tracer(self.path, self.build.target.name)) from None
         if not self.specialize:  # and so do the tables the plugins compute per scene
@@ -340,6 +348,11 @@ class Scene:
         module, _ = compile_kernels(src, self.build, scene=scene, filename=filename,
                                     search_paths=self.search_paths)
         return module
+
+    def quick_fits(self, spp: int | None = None) -> bool:
+        """Whether a render at ``spp`` is small enough for the quick tier of kernels."""
+        film = self.desc.sensor.film
+        return film["width"] * film["height"] * int(spp or self.spp) <= QUICK_SAMPLES
 
     def scene_spec_for_params(self) -> SceneSpec:
         """What ``specialize`` is told about the scene: its instances and kinds."""
@@ -422,7 +435,7 @@ class Scene:
         generic (compiles both to IR, builds no library: for ``rdsl render --report``)."""
         from ...compiler.driver import compile_kernels
 
-        self.compile()
+        self.compile(quick=True)  # whichever tier is loaded
         counts = []
         for scene in (self.scene_spec, parameter_slots(self.scene_spec, self.build.model)[0]):
             module, _ = compile_kernels(self.kernel_src, self.build, scene=scene,
@@ -448,7 +461,7 @@ class Scene:
         :class:`RenderCancelled` (rdsl render --watch drops a render an edit made stale)."""
         spp = int(spp or self.spp)
         seed = self.seed if seed is None else int(seed)
-        mod = self.compile()
+        mod = self.compile(quick=self.quick_fits(spp))
         if mod.traces_rays:  # a path tracer with max_depth 0 traces none: its image is black
             if self.embree is None:
                 raise CompileError("the render kernel traces rays through Embree, but the "

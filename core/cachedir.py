@@ -1,0 +1,31 @@
+"""Where rdsl caches what it compiles: ``$RDSL_CACHE_DIR``, default ``~/.cache/rdsl`` (kernel
+libraries, runtime/cache.py; parsed sources, dsl/parser.py)."""
+
+from __future__ import annotations
+
+import hashlib
+import os
+from functools import lru_cache
+from pathlib import Path
+
+
+def cache_dir() -> Path:
+    """The root of the cache."""
+    env = os.environ.get("RDSL_CACHE_DIR")
+    if env:
+        return Path(env).expanduser()
+    return Path.home() / ".cache" / "rdsl"
+
+
+@lru_cache(maxsize=1)
+def compiler_fingerprint() -> str:
+    """A hash of the compiler's Python sources and grammar, so a changed compiler misses
+    (``core`` included: ``lift`` builds its types and tables with it)."""
+    root = Path(__file__).resolve().parent.parent  # the package
+    h = hashlib.sha256()
+    files = [p for sub in ("compiler", "dsl", "core") for p in sorted((root / sub).rglob("*"))
+             if p.suffix in (".py", ".lark") and p.is_file()]
+    for p in files:
+        h.update(str(p.relative_to(root)).encode())
+        h.update(p.read_bytes())
+    return h.hexdigest()
