@@ -159,9 +159,9 @@ BAD_SCENES = {
     "unknown_rfilter": (['<sensor type="perspective">', '    <film type="hdrfilm">',
                          '        <rfilter type="lanczos"/>', '    </film>', '</sensor>'], 4,
                         "unknown rfilter plugin 'lanczos'; accepted: box, tent, gaussian"),
-    "unknown_sampler": (['<sensor type="perspective">', '    <sampler type="ldsampler"/>',
-                         '</sensor>'], 3, ("unknown sampler plugin 'ldsampler'; accepted: "
-                                          "independent, stratified, multijitter")),
+    "unknown_sampler": (['<sensor type="perspective">', '    <sampler type="sobol"/>',
+                         '</sensor>'], 3, ("unknown sampler plugin 'sobol'; accepted: "
+                                          "independent, stratified, multijitter, orthogonal")),
     "fov_and_focal": (['<sensor type="perspective">', '    <float name="fov" value="45"/>',
                        '    <string name="focal_length" value="35mm"/>', '</sensor>'], 3,
                       "give either 'fov' or 'focal_length', not both"),

@@ -42,14 +42,16 @@ TEMPLATE = Path(__file__).resolve().parents[2] / "stdlib" / "render" / "kernel.r
 # same names
 SCENE_BUFFERS = ("P", "N", "UV", "F", "G", "LC", "LT", "T", "EK", "E", "ENV")
 # the scene's sampler -> the `kind` of stdlib/render/integrator.rdsl's Sampler
-SAMPLER_KINDS = {"independent": 0, "stratified": 1, "multijitter": 3}
+SAMPLER_KINDS = {"independent": 0, "stratified": 1, "multijitter": 3, "orthogonal": 4,
+                 "ldsampler": 6}
 
 
 def sampler_kind(sampler: Any) -> int:
-    """The Sampler `kind` of the scene's sampler (a stratified one without jitter: 2)."""
+    """The Sampler `kind` of the scene's sampler (a stratified one without jitter: 2, an
+    orthogonal one: 5)."""
     kind = SAMPLER_KINDS[sampler.type]
     if sampler.params.get("jitter") is False:
-        return 2  # stratum centres (multijitter's too)
+        return 5 if kind == 4 else 2  # stratum centres (multijitter's too)
     return kind
 
 

@@ -31,6 +31,7 @@ from ...core.scene_spec import Instance, SceneSpec
 from ..tables import fill_tables
 from ..scene import load_scene_description
 from ..scene.reads import recording
+from ..scene.samplers import sample_count
 from .bsdfs import (
     bsdf_instance,
     dispersion_warnings,
@@ -399,7 +400,7 @@ class Scene:
         """The image at ``spp`` samples per pixel.  ``cancel`` is asked after each batch
         of samples (none is running then): once it answers True the render stops with
         :class:`RenderCancelled` (rdsl render --watch drops a render an edit made stale)."""
-        spp = int(spp or self.spp)
+        spp = sample_count(self.desc.sensor.sampler, int(spp or self.spp))
         seed = self.seed if seed is None else int(seed)
         mod = self.compile()
         if mod.traces_rays:  # a path tracer with max_depth 0 traces none: its image is black

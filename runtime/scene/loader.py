@@ -34,6 +34,7 @@ from .errors import scene_error
 from .meshes import Mesh, MeshError
 from .principled import resolve_principled
 from .reads import memoized
+from .samplers import attach_samplers, finish_sampler
 from .schema import (
     AOV_TYPES,
     BITMAP_FORMATS,
@@ -132,9 +133,12 @@ class _Builder:
     # -- the scene ---------------------------------------------------------------------
     def build(self) -> SceneDescription:
         root = self.tree.root
-        integrators, sensors, shapes, emitters = [], [], [], []
+        integrators, sensors, shapes, emitters, samplers = [], [], [], [], []
         for ch in root.children:
             cat = ch.node.category
+            if cat == "sampler":  # as Mitsuba's docs scenes: for sensors without their own
+                samplers.append(self.instantiate(ch.node))
+                continue
             if cat not in SCENE_CHILDREN:
                 where = "<film>" if cat == "rfilter" else "<sensor>"
                 raise scene_error(f"<{cat}> cannot appear directly inside <scene>; nest it "
@@ -159,6 +163,7 @@ class _Builder:
         integrator = integrators[0] if integrators else self.default("integrator", "path")
         if not sensors:
             sensors.append(self.default_sensor(shapes))
+        attach_samplers(sensors, samplers, lambda: self.default("sampler", "independent"))
         return SceneDescription(self.tree.path, integrator, sensors, shapes, emitters,
                                 self.ids, dict(self.tree.params), self.plugins)
 
@@ -503,8 +508,7 @@ class _Builder:
     def finish_sensor(self, obj: Sensor, node: ObjectNode, objects: dict) -> None:
         p = obj.params
         obj.film = objects["film"][0][0] if objects["film"] else self.default("film", "hdrfilm")
-        obj.sampler = (objects["sampler"][0][0] if objects["sampler"]
-                       else self.default("sampler", "independent"))
+        obj.sampler = objects["sampler"][0][0] if objects["sampler"] else None
         m = p["to_world"] if p["to_world"] is not None else xf.identity()
         if xf.has_scale(m):
             raise scene_error(f"{self.what(node)}: scale factors in the camera's 'to_world' are "
@@ -544,9 +548,7 @@ class _Builder:
                 raise scene_error(f"rfilter '{obj.type}': '{k}' must be positive", _loc(node, k))
 
     def finish_sampler(self, obj: Plugin, node: ObjectNode, objects: dict) -> None:
-        if obj.params["sample_count"] <= 0:
-            raise scene_error("sampler: 'sample_count' must be positive",
-                              _loc(node, "sample_count"))
+        finish_sampler(obj, lambda k: _loc(node, k))
 
 
 def _declared(name: str, p: Param) -> str:

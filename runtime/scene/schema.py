@@ -234,6 +234,11 @@ _SPECS = [
     PluginSpec("sampler", "multijitter", {"sample_count": P("integer", 4),
                                           "seed": P("integer", 0),
                                           "jitter": P("boolean", True)}),
+    PluginSpec("sampler", "orthogonal", {"sample_count": P("integer", 4),
+                                         "seed": P("integer", 0), "strength": P("integer", 2),
+                                         "jitter": P("boolean", True)}),
+    PluginSpec("sampler", "ldsampler", {"sample_count": P("integer", 4),
+                                        "seed": P("integer", 0)}),
 ]
 
 SCHEMA: dict[tuple[str, str], PluginSpec] = {(s.category, s.type): s for s in _SPECS}

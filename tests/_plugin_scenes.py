@@ -1,0 +1,44 @@
+"""Small scenes for the plugin-coverage tests (samplers, sensors, shapes, integrators), each
+rendered by rdsl and by Mitsuba 3 with tests/_mitsuba_compare.py."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+LOOKAT = '<transform name="to_world"><lookat origin="{o}" target="{t}" up="0, 1, 0"/></transform>'
+
+
+def film(res: int = 32, height: int | None = None, rfilter: str = "box") -> str:
+    return (f'<film type="hdrfilm"><integer name="width" value="{res}"/>'
+            f'<integer name="height" value="{height or res}"/><rfilter type="{rfilter}"/></film>')
+
+
+def perspective(origin: str = "0, 0, 4", target: str = "0, 0, 0", fov: float = 40,
+                res: int = 32, extra: str = "") -> str:
+    return (f'<sensor type="perspective"><float name="fov" value="{fov}"/>'
+            f'{LOOKAT.format(o=origin, t=target)}{film(res)}{extra}</sensor>')
+
+
+# a grey wall behind the origin, a small sphere light and a dim white environment
+ROOM = """
+  <shape type="rectangle">
+    <transform name="to_world"><scale value="3"/><translate z="-1"/></transform>
+    <bsdf type="diffuse"><rgb name="reflectance" value="0.8, 0.6, 0.4"/></bsdf>
+  </shape>
+  <shape type="sphere">
+    <transform name="to_world"><scale value="0.3"/><translate x="1" y="1.2" z="1.5"/></transform>
+    <emitter type="area"><rgb name="radiance" value="20, 20, 20"/></emitter>
+  </shape>
+  <emitter type="constant"><rgb name="radiance" value="0.3, 0.3, 0.3"/></emitter>"""
+
+
+def write_scene(tmp_path: Path, body: str, sensor: str | None = None, max_depth: int = 4,
+                integrator: str | None = None, name: str = "scene.xml") -> Path:
+    """A scene file: ``integrator`` (a path tracer of ``max_depth`` by default), ``sensor``
+    (a perspective camera at z = 4 by default), ``body`` and the ROOM around it."""
+    integ = integrator or (f'<integrator type="path"><integer name="max_depth" '
+                           f'value="{max_depth}"/></integrator>')
+    path = tmp_path / name
+    path.write_text(f'<scene version="3.0.0">\n  {integ}\n  {sensor or perspective()}\n'
+                    f'  {body}\n{ROOM}\n</scene>\n')
+    return path
