@@ -19,15 +19,15 @@ def perspective(origin: str = "0, 0, 4", target: str = "0, 0, 0", fov: float = 4
             f'{LOOKAT.format(o=origin, t=target)}{film(res)}{extra}</sensor>')
 
 
-# a grey wall behind the origin, a small sphere light and a dim white environment
+# a wall behind the origin, a sphere light out of the cameras' view, a dim environment
 ROOM = """
   <shape type="rectangle">
     <transform name="to_world"><scale value="3"/><translate z="-1"/></transform>
     <bsdf type="diffuse"><rgb name="reflectance" value="0.8, 0.6, 0.4"/></bsdf>
   </shape>
   <shape type="sphere">
-    <transform name="to_world"><scale value="0.3"/><translate x="1" y="1.2" z="1.5"/></transform>
-    <emitter type="area"><rgb name="radiance" value="20, 20, 20"/></emitter>
+    <transform name="to_world"><scale value="0.4"/><translate x="2.5" y="2.5" z="2"/></transform>
+    <emitter type="area"><rgb name="radiance" value="30, 30, 30"/></emitter>
   </shape>
   <emitter type="constant"><rgb name="radiance" value="0.3, 0.3, 0.3"/></emitter>"""
 

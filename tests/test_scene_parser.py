@@ -147,8 +147,7 @@ BAD_SCENES = {
     "point_in_shape": (['<shape type="cube">', '    <emitter type="point"/>', '</shape>'], 3,
                        "only an 'area' emitter can be attached to a shape, not 'point'"),
     "sensor_in_shape": (['<shape type="cube">', '    <sensor type="perspective"/>', '</shape>'],
-                        3, ("shape 'cube' does not accept a nested <sensor>; it accepts <bsdf>, "
-                           "<emitter>")),
+                        3, "only an 'irradiancemeter' sensor can be nested in a <shape>"),
     "film_at_top": (['<film type="hdrfilm"/>'], 2,
                     "<film> cannot appear directly inside <scene>; nest it inside <sensor>"),
     "bad_crop": (['<sensor type="perspective">', '    <film type="hdrfilm">',

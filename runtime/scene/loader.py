@@ -29,12 +29,12 @@ from ..plugins import PluginDecl, PluginRegistry, scene_spec, stdlib_names
 from . import meshes
 from . import transform as xf
 from .analytic import Analytic
-from .camera import fov_x
 from .errors import scene_error
 from .meshes import Mesh, MeshError
 from .principled import resolve_principled
 from .reads import memoized
 from .samplers import attach_samplers, finish_sampler
+from .sensors import METERS, attach_meter, finish_sensor, top_level_sensor
 from .schema import (
     AOV_TYPES,
     BITMAP_FORMATS,
@@ -77,6 +77,7 @@ class Sensor(Plugin):
 
     film: Plugin | None = None
     sampler: Plugin | None = None
+    shape: Plugin | None = None  # the shape an irradiancemeter is nested in
 
 
 @dataclass
@@ -88,6 +89,7 @@ class Shape(Plugin):
     analytic: Analytic | None = None
     bsdf: Plugin | None = None
     emitter: Plugin | None = None
+    sensor: Sensor | None = None  # an irradiancemeter nested in it
 
 
 @dataclass
@@ -147,9 +149,11 @@ class _Builder:
             if cat == "integrator":
                 integrators.append(obj)
             elif cat == "sensor":
+                top_level_sensor(obj, ch.loc)
                 sensors.append(obj)
             elif cat == "shape":
                 shapes.append(obj)
+                sensors += [obj.sensor] if obj.sensor is not None else []
                 if obj.emitter is not None:
                     emitters.append(obj.emitter)
             elif cat == "emitter":
@@ -385,6 +389,9 @@ class _Builder:
                 raise scene_error(f"only an 'area' emitter can be attached to a shape, not "
                                   f"'{em.type}'", ch.loc)
             obj.emitter = em
+        if objects.get("sensor"):
+            attach_meter(obj, objects["sensor"][0][0], objects["sensor"][0][1].loc)
+            obj.sensor = objects["sensor"][0][0]
 
     def finish_bsdf(self, obj: Plugin, node: ObjectNode, objects: dict) -> None:
         p = obj.params
@@ -506,23 +513,11 @@ class _Builder:
             p["aov_list"] = aovs
 
     def finish_sensor(self, obj: Sensor, node: ObjectNode, objects: dict) -> None:
-        p = obj.params
-        obj.film = objects["film"][0][0] if objects["film"] else self.default("film", "hdrfilm")
+        one = {"width": 1, "height": 1} if obj.type in METERS else {}  # a one-pixel film
+        obj.film = objects["film"][0][0] if objects["film"] else self.default("film", "hdrfilm",
+                                                                                **one)
         obj.sampler = objects["sampler"][0][0] if objects["sampler"] else None
-        m = p["to_world"] if p["to_world"] is not None else xf.identity()
-        if xf.has_scale(m):
-            raise scene_error(f"{self.what(node)}: scale factors in the camera's 'to_world' are "
-                              "not allowed", _loc(node, "to_world"))
-        p["to_world"] = m
-        if p["near_clip"] <= 0:
-            raise scene_error("'near_clip' must be greater than zero", _loc(node, "near_clip"))
-        if p["near_clip"] >= p["far_clip"]:
-            raise scene_error("'near_clip' must be smaller than 'far_clip'",
-                              _loc(node, "near_clip"))
-        if p["focus_distance"] is None:
-            p["focus_distance"] = p["far_clip"]
-        aspect = obj.film["width"] / obj.film["height"]
-        p["fov_x"] = fov_x(p, aspect, lambda k: _loc(node, k))
+        finish_sensor(obj, lambda k: _loc(node, k))
 
     def finish_film(self, obj: Plugin, node: ObjectNode, objects: dict) -> None:
         p = obj.params

@@ -95,7 +95,7 @@ def P(kind: str, default: Any = None, choices: tuple[str, ...] | None = None) ->
 _DIST = P("string", "beckmann", ("beckmann", "ggx"))
 _SHAPE = {"to_world": P("transform"), "flip_normals": P("boolean", False)}
 _MESH = {**_SHAPE, "face_normals": P("boolean", False)}
-_SHAPE_CHILDREN = {"bsdf": (0, 1), "emitter": (0, 1)}
+_SHAPE_CHILDREN = {"bsdf": (0, 1), "emitter": (0, 1), "sensor": (0, 1)}
 _ROUGH = {"distribution": _DIST, "alpha": P("ftex", 0.1), "alpha_u": P("ftex"),
           "alpha_v": P("ftex"), "sample_visible": P("boolean", True)}
 _CONDUCTOR = {"material": P("string", "none"), "eta": P("color"), "k": P("color"),
@@ -214,6 +214,14 @@ _SPECS = [
                _SENSOR_CHILDREN),
     PluginSpec("sensor", "thinlens", {**_CAMERA, "aperture_radius": P("float", REQUIRED)},
                _SENSOR_CHILDREN),
+    PluginSpec("sensor", "orthographic", {"to_world": P("transform"),
+                                          "near_clip": P("float", 1e-2),
+                                          "far_clip": P("float", 1e4),
+                                          "shutter_open": P("float", 0.0),
+                                          "shutter_close": P("float", 0.0)}, _SENSOR_CHILDREN),
+    PluginSpec("sensor", "radiancemeter", {"to_world": P("transform"), "origin": P("point"),
+                                           "direction": P("vector")}, _SENSOR_CHILDREN),
+    PluginSpec("sensor", "irradiancemeter", {}, _SENSOR_CHILDREN),
     PluginSpec("film", "hdrfilm", {
         "width": P("integer", 768), "height": P("integer", 576),
         "crop_offset_x": P("integer", 0), "crop_offset_y": P("integer", 0),
