@@ -52,8 +52,8 @@ BAD_SCENES = {
     "bad_attribute_syntax": (['<shape type=cube/>'], 2, "malformed XML: not well-formed"),
     "unknown_element": (['<camera type="perspective"/>'], 2,
                         "unknown element <camera>; accepted: shape, bsdf"),
-    "unknown_shape": (['<shape type="cylinder"/>'], 2,
-                      "unknown shape plugin 'cylinder'; accepted: rectangle, cube, disk, sphere"),
+    "unknown_shape": (['<shape type="torus"/>'], 2,
+                      "unknown shape plugin 'torus'; accepted: rectangle, cube, disk, sphere"),
     "unknown_bsdf": (['<bsdf type="hair" id="p"/>'], 2,
                      "unknown bsdf plugin 'hair'; accepted: diffuse, conductor"),
     "unknown_emitter": (['<emitter type="sunsky"/>'], 2, "unknown emitter plugin 'sunsky'"),
@@ -215,7 +215,7 @@ def test_error_quotes_line_with_caret(tmp_path: Path) -> None:
         load(path)
     lines = str(exc.value).splitlines()
     assert lines[0] == (f"{path}:2:3: error: unknown shape plugin 'torus'; accepted: rectangle, "
-                        "cube, disk, sphere, obj, ply, serialized")
+                        "cube, disk, sphere, cylinder, obj, ply, serialized")
     assert lines[1].strip() == '<shape type="torus"/>'
     assert lines[2].index("^") == lines[1].index("<")
 

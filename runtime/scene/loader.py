@@ -29,6 +29,7 @@ from ..plugins import PluginDecl, PluginRegistry, scene_spec, stdlib_names
 from . import meshes
 from . import transform as xf
 from .analytic import Analytic
+from .cylinder import cylinder_frame, cylinder_mesh
 from .errors import scene_error
 from .meshes import Mesh, MeshError
 from .principled import resolve_principled
@@ -354,6 +355,9 @@ class _Builder:
             mesh = meshes.sphere()
         elif obj.type in ("rectangle", "cube", "disk"):
             mesh = getattr(meshes, obj.type)()
+        elif obj.type == "cylinder":
+            m = m @ cylinder_frame(p, lambda k: _loc(node, k))
+            mesh = cylinder_mesh()
         else:
             path = self.file(node, "filename", "mesh")
             try:

@@ -131,6 +131,8 @@ _SPECS = [
                _SHAPE_CHILDREN),
     PluginSpec("shape", "sphere", {**_SHAPE, "center": P("point"), "radius": P("float", 1.0),
                                    "triangulate": P("boolean", False)}, _SHAPE_CHILDREN),
+    PluginSpec("shape", "cylinder", {**_SHAPE, "p0": P("point"), "p1": P("point"),
+                                     "radius": P("float", 1.0)}, _SHAPE_CHILDREN),
     PluginSpec("shape", "obj", {**_MESH, "filename": P("string", REQUIRED),
                                 "flip_tex_coords": P("boolean", True)}, _SHAPE_CHILDREN),
     PluginSpec("shape", "ply", {**_MESH, "filename": P("string", REQUIRED),
