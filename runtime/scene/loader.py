@@ -486,6 +486,8 @@ class _Builder:
         obj.children = [i for i, _ in objects.get("integrator", [])]
         if obj.decl is not None:  # a user's plugin (or one given as a file): its own params
             return
+        p["nested_names"] = [ch.name or f"_arg_{k}"
+                             for k, (_, ch) in enumerate(objects.get("integrator", []))]
         if obj.type == "path":
             if p["max_depth"] < -1:
                 raise scene_error("path: 'max_depth' must be -1 (infinite) or >= 0",

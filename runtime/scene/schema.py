@@ -209,6 +209,7 @@ _SPECS = [
                                         "hide_emitters": P("boolean", False)}),
     PluginSpec("integrator", "aov", {"aovs": P("string", REQUIRED)}, {"integrator": (0, 8)}),
     PluginSpec("integrator", "stokes", {}, {"integrator": (1, 1)}),
+    PluginSpec("integrator", "moment", {}, {"integrator": (1, 8)}),
     # sensors, film, filters, samplers
     PluginSpec("sensor", "perspective", {**_CAMERA,
                                          "principal_point_offset_x": P("float", 0.0),
