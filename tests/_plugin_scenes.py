@@ -42,3 +42,35 @@ def write_scene(tmp_path: Path, body: str, sensor: str | None = None, max_depth:
     path.write_text(f'<scene version="3.0.0">\n  {integ}\n  {sensor or perspective()}\n'
                     f'  {body}\n{ROOM}\n</scene>\n')
     return path
+
+
+def median_rmse(path: Path, spp: int, seeds: int = 3, ref_spp: int = 4096
+                ) -> tuple[float, float]:
+    """Median RMSEs of rdsl (rgb) and Mitsuba (scalar_rgb) at ``spp`` over ``seeds`` seeds,
+    against a ``ref_spp`` Mitsuba render (a rare firefly moves a mean, not a median)."""
+    import numpy as np
+    import rdsl
+    from _mitsuba_compare import mitsuba_render
+
+    ref = mitsuba_render(path, ref_spp, seed=100)
+    scene = rdsl.load_scene(path)
+
+    def err(img: np.ndarray) -> float:
+        return float(np.sqrt(np.mean((np.asarray(img, np.float64)[..., :3] - ref) ** 2)))
+
+    mine = np.median([err(scene.render(spp=spp, seed=k)) for k in range(seeds)])
+    theirs = np.median([err(mitsuba_render(path, spp, seed=10 + k)) for k in range(seeds)])
+    return float(mine), float(theirs)
+
+
+def check_bad(tmp_path: Path, body: str, message: str) -> None:
+    """``body`` on line 3 of a scene fails to load with ``message``, naming that line."""
+    import pytest
+    from rdsl.runtime.scene import SceneError, load_scene_description
+
+    path = tmp_path / "bad.xml"
+    path.write_text(f'<scene version="3.0.0">\n  <shape type="sphere"/>\n  {body}\n</scene>\n')
+    with pytest.raises(SceneError) as exc:
+        load_scene_description(path)
+    text = str(exc.value)
+    assert message in text and text.startswith(f"{path}:3:"), text

@@ -6,10 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from _mitsuba_compare import mitsuba_render
-from _plugin_scenes import perspective
-
-import rdsl
+from _plugin_scenes import median_rmse, perspective
 from rdsl.runtime.render.image import write_exr
 
 pytest.importorskip("rdsl.runtime.embree")
@@ -45,12 +42,5 @@ def test_rotated_scaled_envmap_against_mitsuba(tmp_path, rotation):
     <float name="scale" value="1.7"/>
     <transform name="to_world">{ROTATIONS[rotation]}</transform></emitter>
 </scene>""")
-    ref = mitsuba_render(path, 4096, seed=100)
-    scene = rdsl.load_scene(path)
-
-    def err(img: np.ndarray) -> float:
-        return float(np.sqrt(np.mean((np.asarray(img, np.float64)[..., :3] - ref) ** 2)))
-
-    mine = np.median([err(scene.render(spp=32, seed=k)) for k in range(3)])
-    theirs = np.median([err(mitsuba_render(path, 32, seed=10 + k)) for k in range(3)])
+    mine, theirs = median_rmse(path, 32)
     assert mine <= 1.2 * theirs, (mine, theirs)

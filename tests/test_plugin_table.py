@@ -5,9 +5,8 @@ the table says rdsl has does load."""
 from __future__ import annotations
 
 import pytest
-
-from rdsl.tools.gen_plugin_table import DOC, MITSUBA, supported, updated
 from rdsl.runtime.scene import SceneError, load_scene_description
+from rdsl.tools.gen_plugin_table import DOC, MITSUBA, supported, updated
 
 
 def test_the_committed_table_is_up_to_date():

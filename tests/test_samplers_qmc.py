@@ -10,10 +10,9 @@ import warnings
 
 import numpy as np
 import pytest
+import rdsl
 from _plugin_scenes import write_scene
 from _scenes import CBOX
-
-import rdsl
 from rdsl.runtime.render.image import read_exr, rmse
 from rdsl.runtime.scene import SceneError, load_scene_description
 from rdsl.runtime.scene.samplers import valid_count
@@ -146,13 +145,13 @@ def test_top_level_sampler_applies_to_sensors_without_their_own(tmp_path):
 BAD = {
     "strength": ('<sampler type="orthogonal"><integer name="strength" value="3"/></sampler>',
                  "rdsl builds orthogonal arrays of strength 2 only"),
-    "float_count": ('<sampler type="ldsampler"><float name="sample_count" value="16"/>'
-                    '</sampler>', "parameter 'sample_count' of sampler 'ldsampler' expects an "
-                    "integer, got <float>"),
+    "float_count": (('<sampler type="ldsampler"><float name="sample_count" value="16"/>'
+                    '</sampler>'), ("parameter 'sample_count' of sampler 'ldsampler' expects an "
+                    "integer, got <float>")),
     "ld_jitter": ('<sampler type="ldsampler"><boolean name="jitter" value="false"/></sampler>',
                   "unknown parameter 'jitter' of sampler 'ldsampler'"),
-    "zero_count": ('<sampler type="orthogonal"><integer name="sample_count" value="0"/>'
-                   '</sampler>', "'sample_count' must be positive"),
+    "zero_count": (('<sampler type="orthogonal"><integer name="sample_count" value="0"/>'
+                   '</sampler>'), "'sample_count' must be positive"),
     "two": ('<sampler type="ldsampler"/>\n<sampler type="orthogonal"/>',
             "more than one <sampler> outside its sensors"),
 }

@@ -6,11 +6,10 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from _mitsuba_compare import mitsuba_render
-from _plugin_scenes import film, write_scene
-
 import rdsl
-from rdsl.runtime.scene import SceneError, load_scene_description
+from _mitsuba_compare import mitsuba_render
+from _plugin_scenes import check_bad, film, median_rmse, write_scene
+from rdsl.runtime.scene import load_scene_description
 
 pytest.importorskip("rdsl.runtime.embree")
 pytest.importorskip("mitsuba")
@@ -22,19 +21,6 @@ BALL = ('<shape type="sphere"><transform name="to_world"><scale value="0.5"/></t
         '<bsdf type="roughconductor"><float name="alpha" value="0.2"/></bsdf></shape>')
 
 
-def _median_rmse(path, spp: int, seeds: int = 3) -> tuple[float, float]:
-    """Median RMSEs of rdsl and Mitsuba at ``spp`` against a 4096-spp Mitsuba render."""
-    ref = mitsuba_render(path, 4096, seed=100)
-    scene = rdsl.load_scene(path)
-
-    def err(img: np.ndarray) -> float:
-        return float(np.sqrt(np.mean((np.asarray(img, np.float64)[..., :3] - ref) ** 2)))
-
-    mine = np.median([err(scene.render(spp=spp, seed=k)) for k in range(seeds)])
-    theirs = np.median([err(mitsuba_render(path, spp, seed=10 + k)) for k in range(seeds)])
-    return float(mine), float(theirs)
-
-
 @pytest.mark.parametrize("crop", [False, True])
 def test_orthographic_against_mitsuba(tmp_path, crop):
     """A scaled orthographic view of a sphere (a non-square film, and a crop window)."""
@@ -44,7 +30,7 @@ def test_orthographic_against_mitsuba(tmp_path, crop):
                       '"crop_width" value="16"/><integer name="crop_offset_y" value="4"/>'
                       '<integer name="crop_height" value="12"/><rfilter')
     path = write_scene(tmp_path, BALL, sensor=ORTHO.format(film=f))
-    mine, theirs = _median_rmse(path, 32)
+    mine, theirs = median_rmse(path, 32)
     assert mine <= 1.2 * theirs, (mine, theirs)
 
 
@@ -128,35 +114,29 @@ def test_irradiancemeter_under_a_uniform_sky_is_pi_times_its_radiance(tmp_path):
 BAD = {
     "meter_film": (f'<sensor type="radiancemeter">{film(2)}</sensor>',
                    "radiancemeter: the film must be 1x1 pixels"),
-    "origin_only": ('<sensor type="radiancemeter"><point name="origin" value="0, 0, 1"/>'
-                    '</sensor>', "give both 'origin' and 'direction' (missing 'direction')"),
-    "both_forms": ('<sensor type="radiancemeter"><transform name="to_world"><translate x="1"/>'
+    "origin_only": (('<sensor type="radiancemeter"><point name="origin" value="0, 0, 1"/>'
+                    '</sensor>'), "give both 'origin' and 'direction' (missing 'direction')"),
+    "both_forms": (('<sensor type="radiancemeter"><transform name="to_world"><translate x="1"/>'
                    '</transform><point name="origin" value="0, 0, 1"/><vector name="direction"'
-                   ' value="0, 0, 1"/></sensor>', "give either 'to_world' or 'origin'"),
-    "zero_direction": ('<sensor type="radiancemeter"><point name="origin" value="0, 0, 1"/>'
-                       '<vector name="direction" value="0, 0, 0"/></sensor>',
+                   ' value="0, 0, 1"/></sensor>'), "give either 'to_world' or 'origin'"),
+    "zero_direction": (('<sensor type="radiancemeter"><point name="origin" value="0, 0, 1"/>'
+                       '<vector name="direction" value="0, 0, 0"/></sensor>'),
                        "'direction' is zero"),
-    "direction_type": ('<sensor type="radiancemeter"><float name="direction" value="1"/>'
-                       '</sensor>', "parameter 'direction' of sensor 'radiancemeter' expects a "
-                       "vector, got <float>"),
+    "direction_type": (('<sensor type="radiancemeter"><float name="direction" value="1"/>'
+                       '</sensor>'), ("parameter 'direction' of sensor 'radiancemeter' expects a "
+                       "vector, got <float>")),
     "meter_top": ('<sensor type="irradiancemeter"/>', "must be nested inside the <shape>"),
-    "meter_mesh": (f'<shape type="cube"><sensor type="irradiancemeter"/></shape>',
+    "meter_mesh": ('<shape type="cube"><sensor type="irradiancemeter"/></shape>',
                    "not on a 'cube' shape"),
     "camera_in_shape": ('<shape type="disk"><sensor type="perspective"/></shape>',
                         "only an 'irradiancemeter' sensor can be nested in a <shape>"),
     "ortho_fov": ('<sensor type="orthographic"><float name="fov" value="30"/></sensor>',
                   "unknown parameter 'fov' of sensor 'orthographic'"),
-    "ortho_clip": ('<sensor type="orthographic"><float name="near_clip" value="0"/>'
-                   '</sensor>', "'near_clip' must be greater than zero"),
+    "ortho_clip": (('<sensor type="orthographic"><float name="near_clip" value="0"/>'
+                   '</sensor>'), "'near_clip' must be greater than zero"),
 }
 
 
 @pytest.mark.parametrize("case", sorted(BAD))
 def test_bad_sensor(tmp_path, case):
-    body, message = BAD[case]
-    path = tmp_path / "bad.xml"
-    path.write_text(f'<scene version="3.0.0">\n  <shape type="sphere"/>\n  {body}\n</scene>\n')
-    with pytest.raises(SceneError) as exc:
-        load_scene_description(path)
-    text = str(exc.value)
-    assert message in text and text.startswith(f"{path}:3:"), text
+    check_bad(tmp_path, *BAD[case])

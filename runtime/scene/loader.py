@@ -35,7 +35,6 @@ from .meshes import Mesh, MeshError
 from .principled import resolve_principled
 from .reads import memoized
 from .samplers import attach_samplers, finish_sampler
-from .sensors import METERS, attach_meter, finish_sensor, top_level_sensor
 from .schema import (
     AOV_TYPES,
     BITMAP_FORMATS,
@@ -47,6 +46,7 @@ from .schema import (
     PluginSpec,
     plugin_types,
 )
+from .sensors import METERS, attach_meter, finish_sensor, top_level_sensor
 from .spectra import Color, as_reflectance, conductor_ior, lookup_ior
 from .xml import Child, ObjectNode, Prop, SceneTree, read_scene
 
