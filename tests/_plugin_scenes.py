@@ -33,14 +33,16 @@ ROOM = """
 
 
 def write_scene(tmp_path: Path, body: str, sensor: str | None = None, max_depth: int = 4,
-                integrator: str | None = None, name: str = "scene.xml") -> Path:
+                integrator: str | None = None, name: str = "scene.xml",
+                room: bool = True) -> Path:
     """A scene file: ``integrator`` (a path tracer of ``max_depth`` by default), ``sensor``
-    (a perspective camera at z = 4 by default), ``body`` and the ROOM around it."""
+    (a perspective camera at z = 4 by default), ``body`` and the ROOM around it (unless
+    ``room`` is false)."""
     integ = integrator or (f'<integrator type="path"><integer name="max_depth" '
                            f'value="{max_depth}"/></integrator>')
     path = tmp_path / name
     path.write_text(f'<scene version="3.0.0">\n  {integ}\n  {sensor or perspective()}\n'
-                    f'  {body}\n{ROOM}\n</scene>\n')
+                    f'  {body}\n{ROOM if room else ""}\n</scene>\n')
     return path
 
 

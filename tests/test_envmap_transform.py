@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from _plugin_scenes import median_rmse, perspective
+from _plugin_scenes import median_rmse, perspective, write_scene
 from rdsl.runtime.render.image import write_exr
 
 pytest.importorskip("rdsl.runtime.embree")
@@ -32,15 +32,12 @@ def _sky(tmp_path) -> str:
 @pytest.mark.parametrize("rotation", sorted(ROTATIONS))
 def test_rotated_scaled_envmap_against_mitsuba(tmp_path, rotation):
     sky = _sky(tmp_path)
-    path = tmp_path / "env.xml"
-    path.write_text(f"""<scene version="3.0.0">
-  <integrator type="path"><integer name="max_depth" value="3"/></integrator>
-  {perspective(origin="0, 0.5, 4", fov=60)}
-  <shape type="sphere"><transform name="to_world"><scale value="0.8"/></transform>
+    body = f"""<shape type="sphere"><transform name="to_world"><scale value="0.8"/></transform>
     <bsdf type="diffuse"><rgb name="reflectance" value="0.7, 0.7, 0.7"/></bsdf></shape>
   <emitter type="envmap"><string name="filename" value="{sky}"/>
     <float name="scale" value="1.7"/>
-    <transform name="to_world">{ROTATIONS[rotation]}</transform></emitter>
-</scene>""")
+    <transform name="to_world">{ROTATIONS[rotation]}</transform></emitter>"""
+    path = write_scene(tmp_path, body, perspective(origin="0, 0.5, 4", fov=60), max_depth=3,
+                       room=False)
     mine, theirs = median_rmse(path, 32)
     assert mine <= 1.2 * theirs, (mine, theirs)

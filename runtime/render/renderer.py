@@ -170,7 +170,8 @@ def flatten(desc: Any, triangulate: bool = False, model: ColorModel = RGB
 
     bufs = SceneBuffers(cat(P, np.float32), cat(N, np.float32), cat(UV, np.float32),
                         cat(F, np.int32), cat(G, np.int32),
-                        emitter_tables(desc, lights, len(emitters), analytic_lights, model),
+                        emitter_tables(desc, lights, len(emitters), analytic_lights, model,
+                                      textures),
                         meshes)
     bufs.T, bufs.textures = textures.buffer(model), textures.instances
     return bufs, bsdfs, emitters
