@@ -181,6 +181,10 @@ BUILTINS: dict[str, Builtin] = _table(
     Builtin("depolarizer", Sig.FIXED, Op.SPEC_DEPOL, (UNPOLARIZED,), SPECTRUM),
     Builtin("mueller", Sig.MUELLER, Op.SPEC_MUELLER),
     Builtin("mueller_entry", Sig.MUELLER_ENTRY, _mueller_entry),
+    # SIMD: whether `b` holds in any active lane (a uniform value: the lanes of a vectorized
+    # kernel then take the same branch, e.g. a packet of rays one BVH node; `b` itself
+    # where a lane runs alone)
+    Builtin("any_lane", Sig.FIXED, Op.ANY, (BOOL,), BOOL),
     # ray queries
     Builtin("trace", Sig.RAY, Op.INTERSECT, result="Hit", effects=True),
     Builtin("occluded", Sig.RAY, Op.OCCLUDED, result=BOOL, effects=True),

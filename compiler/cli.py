@@ -20,8 +20,9 @@ Command = Callable[[argparse.Namespace], int]
 _VARIANTS_HELP = ", ".join(VARIANTS) + " (default: rgb)"
 _AD_HELP = ("differentiate: 'forward' gives each kernel with Float arguments a tangent "
             "argument per argument and a tangent result per Float result (docs/ad.md)")
-_WIDTH_HELP = ("SIMD width of target c: 1, 4, 8 or 16 (default: the host's widest); the "
-               "LLVM targets have their own")
+_ARCH_HELP = "GPU architecture of target ptx: sm_70 (default), sm_80 or sm_90"
+_WIDTH_HELP = ("SIMD width of target c, or the lanes per work-item of target opencl: 1, 4, "
+               "8 or 16 (default: the host's widest); the LLVM targets have their own")
 
 
 def add_commands(sub: argparse._SubParsersAction) -> dict[str, Command]:
@@ -43,9 +44,11 @@ def add_commands(sub: argparse._SubParsersAction) -> dict[str, Command]:
     k = sub.add_parser("compile", help="compile to a shared library, C header and manifest")
     k.add_argument("file")
     k.add_argument("--target", default="host",
-                   help="scalar, sse4, avx2, avx512, host (default), or c (SIMD C source "
-                        "compiled by the machine's cc)")
+                   help="scalar, sse4, avx2, avx512, host (default), c (SIMD C source "
+                        "compiled by the machine's cc), opencl (STEM.cl: OpenCL C, built "
+                        "by the OpenCL driver when loaded), or ptx (CUDA PTX: STEM.ptx)")
     k.add_argument("--width", type=int, default=None, help=_WIDTH_HELP)
+    k.add_argument("--arch", default=None, help=_ARCH_HELP)
     k.add_argument("--variant", default="rgb", help=_VARIANTS_HELP)
     k.add_argument("-o", "--output", default=None,
                    help="output stem: writes STEM.so, STEM.h and STEM.json "
@@ -115,11 +118,16 @@ def _compile(args: argparse.Namespace) -> int:
     from .build import Build
     from .driver import compile_kernels
 
-    build = Build.of(args.target, args.variant, args.width, args.ad)
+    build = Build.of(_target(args), args.variant, args.width, args.ad)
     tgt = build.target
-    if (args.emit == "c") != (tgt.backend == "c") and args.emit != "lib":
+    if tgt.backend == "ptx" and args.emit == "obj":
+        raise CompileError("--emit obj needs a CPU target; target ptx writes PTX text "
+                           "(--emit lib or asm)")
+    llvm_like = tgt.backend in ("llvm", "ptx")  # LLVM IR and assembly exist for these
+    if args.emit != "lib" and not (tgt.backend == "c" if args.emit == "c" else llvm_like):
+        other = "c or lib" if tgt.backend == "c" else "lib"
         raise CompileError(f"--emit {args.emit} needs " + ("--target c" if args.emit == "c"
-                           else f"an LLVM target, not `{tgt.name}` (use --emit c or lib)"))
+                           else f"an LLVM target, not `{tgt.name}` (use --emit {other})"))
     src = _require_file(args.file).resolve()
     module, _ = compile_kernels(src, build)
     if args.emit in ("llvm", "asm", "obj"):
@@ -135,9 +143,9 @@ def _compile(args: argparse.Namespace) -> int:
         print(f"wrote {out}")
         return 0
     stem = Path(args.output) if args.output else Path(src.stem)
-    if stem.suffix in (".so", ".h", ".json", ".c"):
+    if stem.suffix in (".so", ".h", ".json", ".c", ".cl", ".ptx"):
         stem = stem.with_suffix("")
-    for ext in (".so", ".h", ".json", ".c"):
+    for ext in (".so", ".h", ".json", ".c", ".cl", ".ptx"):
         _refuse_input(stem.with_suffix(ext) if stem.suffix == "" else
                       Path(str(stem) + ext), src)
     out_dir = stem.parent if str(stem.parent) else Path(".")
@@ -145,11 +153,27 @@ def _compile(args: argparse.Namespace) -> int:
         from .backends.c_build import build_c_library
 
         paths = build_c_library(module, tgt, out_dir, stem.name, source_only=True)
+    elif tgt.backend == "ptx":
+        from .backends.ptx import build_ptx
+
+        paths = build_ptx(module, tgt, out_dir, stem.name)
     else:
         paths = build_library(module, tgt, out_dir, stem.name)
     for p in paths.values() if isinstance(paths, dict) else paths:
         print(f"wrote {p}")
     return 0
+
+
+def _target(args: argparse.Namespace):
+    """The target name, or the ptx target of ``--arch`` (which needs ``--target ptx``)."""
+    if args.arch is None:
+        return args.target
+    if args.target != "ptx":
+        raise CompileError(f"--arch picks the GPU architecture of target ptx, not of "
+                           f"`{args.target}`")
+    from .targets import ptx_target
+
+    return ptx_target(args.arch)
 
 
 def _refuse_input(out: Path, src: Path) -> None:

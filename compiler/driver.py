@@ -7,6 +7,7 @@ error naming the pass.
 
 from __future__ import annotations
 
+import os
 import sys
 from collections.abc import Callable
 from pathlib import Path
@@ -53,18 +54,22 @@ def pipeline(build: Build, scene: SceneSpec | None = None,
     ]
 
 
-def run_passes(module: Module, passes: list[Pass], verify: bool = True,
+def run_passes(module: Module, passes: list[Pass], verify: bool | str = True,
                print_after: str | None = None, out: TextIO = sys.stdout,
                stop_after: str | None = None) -> Module:
-    """Run ``passes`` in order, verifying after each and printing where asked."""
+    """Run ``passes`` in order, printing where asked.  ``verify``: True (or "each")
+    verifies the IR after lowering and after every pass; "ends" after lowering and after
+    the last pass only (what renders use: every pass's output is checked by the tests,
+    and a fifth of a cold compile went to re-verifying); False never."""
     from .printer import print_module
     from .verify import verify as verify_module
 
     if verify:
         _guard("lower", lambda: verify_module(module))
-    for p in passes:
+    for k, p in enumerate(passes):
         _guard(p.name, lambda p=p: p.run(module))
-        if verify:
+        last = k == len(passes) - 1 or stop_after == p.name
+        if verify is True or verify == "each" or (verify == "ends" and last):
             _guard(p.name, lambda: verify_module(module))
         if print_after in (p.name, "all"):
             out.write(f"// ----- after {p.name} -----\n")
@@ -100,6 +105,12 @@ def frontend(source_or_path: str | Path, filename: str | None = None,
         raise CompileError("program too deeply nested") from e
 
 
+def verify_mode() -> str:
+    """How a compile for a render verifies its IR: after lowering and at the end, or after
+    every pass when ``RDSL_VERIFY_EACH=1`` (to find which pass broke an invariant)."""
+    return "each" if os.environ.get("RDSL_VERIFY_EACH", "") not in ("", "0") else "ends"
+
+
 def compile_kernels(source_or_path: str | Path, build: Build, filename: str | None = None,
                     scene: SceneSpec | None = None, report: list[str] | None = None,
                     search_paths: list[Path] | None = None) -> tuple[Module, list[Path]]:
@@ -108,6 +119,6 @@ def compile_kernels(source_or_path: str | Path, build: Build, filename: str | No
     placeholders (see :mod:`rdsl.compiler.passes.specialize`); ``report`` collects what
     specialization did; ``search_paths`` are the frontend's (see :func:`frontend`)."""
     module = frontend(source_or_path, filename, search_paths)
-    run_passes(module, pipeline(build, scene, report))
+    run_passes(module, pipeline(build, scene, report), verify=verify_mode())
     module.attrs["target"] = build.target.name
     return module, source_files(source_or_path, search_paths or (), filename=filename)

@@ -260,6 +260,10 @@ def element_type(t: Type) -> Type:
 class Op(enum.Enum):
     """Every IR operation, grouped by category.  The value is the printed mnemonic."""
 
+    # members are singletons: hash by identity (Enum's default hashes the name, and the
+    # passes hash ops millions of times per scene)
+    __hash__ = object.__hash__
+
     # constants and parameters
     CONST = "const"  # attrs: value (python int/float/bool)
     # arithmetic: elementwise on scalars and on homogeneous aggregates of the same type

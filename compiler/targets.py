@@ -4,7 +4,12 @@
 ``llvmlite.binding.get_host_cpu_features()``.  ``get_target("c", width)`` is the SIMD C
 target (``backend == "c"``, see ``backends/c.py``) at width 1, 4, 8 or 16, compiled by the
 machine's ``cc`` for the machine itself (``-march=native``); without a width it takes the
-host's widest LLVM target's.
+host's widest LLVM target's.  ``get_target("opencl", width)`` is OpenCL C
+(``backends/opencl.py``): W lanes per work-item as OpenCL vectors (1, 4, 8 or 16; by
+default as many as the widest LLVM target's), run by the machine's OpenCL driver (PoCL on a
+CPU, which compiles for the host).  ``get_target("ptx")`` (or :func:`ptx_target` with an
+``sm_XY`` architecture) is CUDA PTX through LLVM's NVPTX backend: width 1, one lane per CUDA
+thread (``backends/ptx.py``).
 """
 
 from __future__ import annotations
@@ -28,10 +33,12 @@ class Target:
     features: str
     requires: tuple[str, ...] = ()
     vector_bits: int = 128
-    backend: str = "llvm"  # which code generator: "llvm" or "c"
+    backend: str = "llvm"  # which code generator: "llvm", "c", "opencl" or "ptx" (NVPTX)
 
     @property
     def triple(self) -> str:
+        if self.backend == "ptx":
+            return "nvptx64-nvidia-cuda"
         import llvmlite.binding as llvm
 
         return llvm.get_default_triple()
@@ -87,8 +94,10 @@ def host_features() -> frozenset[str]:
 def host_supports(target: Target | str) -> bool:
     """True if code compiled for ``target`` can run on this machine."""
     t = get_target(target) if isinstance(target, str) else target
-    if t.backend == "c":  # compiled by this machine's cc, for this machine
+    if t.backend in ("c", "opencl"):  # compiled on this machine (cc, the OpenCL driver)
         return True
+    if t.backend == "ptx":  # runs on a CUDA GPU (runtime/cuda.py), never on the CPU
+        return False
     feats = host_features()
     if not feats:
         return t.name == "scalar"
@@ -106,36 +115,52 @@ def host_target() -> Target:
 C_WIDTHS = (1, 4, 8, 16)
 
 
-def c_target(width: int | None = None) -> Target:
-    """The SIMD C target of ``width`` lanes (default: the host's widest LLVM target's)."""
+def c_target(width: int | None = None, backend: str = "c") -> Target:
+    """The SIMD C target of ``width`` lanes (default: the host's widest LLVM target's), or
+    with ``backend="opencl"`` the OpenCL C target (``width`` lanes per work-item)."""
     if width is None:
         width = host_target().width
     if width not in C_WIDTHS:
-        raise CompileError(f"unsupported SIMD width {width} for target `c` (valid widths: "
-                           f"{', '.join(map(str, C_WIDTHS))})")
-    return Target("c", width, "native", "", (), 32 * width, backend="c")
+        raise CompileError(f"unsupported SIMD width {width} for target `{backend}` (valid "
+                           f"widths: {', '.join(map(str, C_WIDTHS))})")
+    return Target(backend, width, "native" if backend == "c" else backend, "", (),
+                  32 * width, backend=backend)
+
+
+PTX_ARCHS = ("sm_70", "sm_80", "sm_90")  # Volta, Ampere, Hopper
+
+
+def ptx_target(arch: str = "sm_70") -> Target:
+    """CUDA PTX for GPU architecture ``arch`` (``sm_70``, ``sm_80`` or ``sm_90``); a GPU of
+    that architecture or a newer one runs it."""
+    if arch not in PTX_ARCHS:
+        raise CompileError(f"unknown GPU architecture `{arch}` for target `ptx` (valid: "
+                           f"{', '.join(PTX_ARCHS)})")
+    return Target("ptx", 1, arch, "", (), 32, backend="ptx")
 
 
 def get_target(name: str | Target, width: int | None = None) -> Target:
     """Look a target up by name (``scalar``, ``sse4``, ``avx2``, ``avx512``, ``host`` or
-    ``c``).  ``width`` picks the width of ``c``; an LLVM target has its own, which a
-    different ``width`` contradicts (a diagnostic)."""
+    ``c``), ``opencl`` or ``ptx``.  ``width`` picks the width of ``c`` and ``opencl``; an
+    LLVM target has its own, which a different ``width`` contradicts (a diagnostic)."""
     if isinstance(name, Target):
         t = name
-    elif name == "c":
-        return c_target(width)
+    elif name in ("c", "opencl"):
+        return c_target(width, name)
+    elif name == "ptx":
+        t = ptx_target()
     elif name == "host":
         t = host_target()
     else:
         found = TARGETS.get(name)
         if found is None:
-            valid = ", ".join([*TARGETS, "host", "c"])
+            valid = ", ".join([*TARGETS, "host", "c", "opencl", "ptx"])
             raise CompileError(f"unknown target `{name}` (valid targets: {valid})")
         t = found
     if width is not None and width != t.width:
-        if t.backend == "c":
-            return c_target(width)
+        if t.backend in ("c", "opencl"):
+            return c_target(width, t.backend)
         raise CompileError(f"target `{t.name}` has SIMD width {t.width}, not {width} "
-                           "(a width can be chosen for target `c`, which takes "
+                           "(a width can be chosen for targets `c` and `opencl`, which take "
                            f"{', '.join(map(str, C_WIDTHS))})")
     return t

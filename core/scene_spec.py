@@ -74,3 +74,5 @@ class SceneSpec:
     shape_kinds: tuple[int, ...] | None = None
     # the scene's integrators (one per plugin type: a wrapper such as `aov`, its nested one)
     integrators: list[Instance] = field(default_factory=list)
+    # how rays are traced: "embree", or "bvh" (stdlib/render/bvh.rdsl)
+    accel: str = "embree"

@@ -79,7 +79,7 @@ def parse(source: str, filename: str) -> A.Program:
             raise _syntax_error(e, filename, source, parser) from None
         except LarkError as e:  # pragma: no cover - defensive
             raise CompileError(f"syntax error: {e}", Loc(filename, 1, 1)) from None
-        if len(_TREES) > 64:
+        if len(_TREES) > 512:
             _TREES.pop(next(iter(_TREES)))
         _TREES[(filename, source)] = tree
     try:

@@ -80,8 +80,11 @@ class Module:
         # hashes), which `rdsl render --watch` watches
         self.source_files: list[Path] = []
         self._lib = lib
-        self.kernels: dict[str, Kernel] = {k["name"]: Kernel(self, k, lib)
+        self.kernels: dict[str, Kernel] = {k["name"]: self._make_kernel(k, lib)
                                            for k in manifest["kernels"]}
+
+    def _make_kernel(self, info: dict[str, Any], lib: Any) -> Kernel:
+        return Kernel(self, info, lib)
 
     @property
     def variant(self) -> str | None:
@@ -144,7 +147,7 @@ class Module:
 
 def _resolve(path: str | os.PathLike) -> tuple[Path, Path]:
     p = Path(path)
-    if p.suffix in (".so", ".json", ".h"):
+    if p.suffix in (".so", ".json", ".h", ".cl"):
         stem = p.with_suffix("")
     else:
         stem = p
@@ -153,20 +156,25 @@ def _resolve(path: str | os.PathLike) -> tuple[Path, Path]:
 
 def load(path: str | os.PathLike, *, from_cache: bool = False,
          compile_seconds: float = 0.0) -> Module:
-    """Load a compiled library: ``path`` is the ``.so``, the ``.json`` manifest or their stem."""
+    """Load a compiled library: ``path`` is the ``.so`` (the ``.cl`` of target opencl), the
+    ``.json`` manifest or their stem."""
     from ..compiler.targets import get_target, host_supports
 
     so, man = _resolve(path)
+    manifest: dict[str, Any] = {}
+    if man.is_file():
+        try:
+            manifest = json.loads(man.read_text())
+            target = manifest["target"]
+            manifest["kernels"]
+            variant = manifest.get("variant")
+        except (OSError, ValueError, KeyError, TypeError, AttributeError) as e:
+            raise CompileError(f"{man}: not a valid rdsl manifest ({e})") from None
+        if manifest.get("backend") == "opencl":  # an OpenCL C program, built at load
+            so = so.with_suffix(".cl")
     if not man.is_file() or not so.is_file():
         missing = man if not man.is_file() else so
         raise FileNotFoundError(f"no compiled rdsl module at `{path}` (missing {missing})")
-    try:
-        manifest = json.loads(man.read_text())
-        target = manifest["target"]
-        manifest["kernels"]
-        variant = manifest.get("variant")
-    except (OSError, ValueError, KeyError, TypeError, AttributeError) as e:
-        raise CompileError(f"{man}: not a valid rdsl manifest ({e})") from None
     if variant is not None and variant not in MODELS:
         raise CompileError(f"{man}: not a valid rdsl manifest (unknown variant `{variant}`)")
     if manifest.get("abi", 1) != ABI_VERSION:
@@ -180,6 +188,10 @@ def load(path: str | os.PathLike, *, from_cache: bool = False,
     if not runnable:
         raise RuntimeError(f"{so} was compiled for target `{target}`, which this CPU cannot "
                            "run; recompile with --target host")
+    if manifest.get("backend") == "opencl":
+        from .opencl import load_opencl
+
+        return load_opencl(so, manifest, from_cache, compile_seconds)
     try:
         lib = _dlopen(so)
     except OSError as e:
@@ -209,6 +221,10 @@ def jit(source_or_path: str | os.PathLike, target: str | Target = "host",
 
     t0 = time.perf_counter()
     build = build or Build.of(target, variant, width)
+    if build.target.backend == "ptx":  # kernels on a CUDA GPU, not a CPU library
+        from .cuda import jit_ptx
+
+        return jit_ptx(source_or_path, build, **options)
     text = _source_text(source_or_path)
     files = [Path(f) for f in source_files(source_or_path, options.get("search_paths") or (),
                                            filename=options.get("filename"))]

@@ -74,4 +74,6 @@ def cache_key(source_text: str, files: Iterable[os.PathLike | str], build: Build
 
 
 def entry_complete(d: Path) -> bool:
-    return all((d / f"{STEM}{s}").is_file() for s in (".so", ".json"))
+    # a native library, or the OpenCL C program of target opencl
+    return (d / f"{STEM}.json").is_file() and \
+        any((d / f"{STEM}{s}").is_file() for s in (".so", ".cl"))

@@ -89,6 +89,11 @@ class Kernel:
                          if p["uniform"] and p["type"]["kind"] != "buffer"}
         self.pool = OutputPool()  # fresh outputs' blocks, reused once no result holds them
         self._strided = [bool(a.get("strided")) for a in self.args]
+        self._bind_native(lib)
+
+    def _bind_native(self, lib: ctypes.CDLL) -> None:
+        """Look the entry points up in ``lib`` and declare their C argument types."""
+        info = self.info
         argtypes: list[Any] = []
         for a, strided in zip(self.args, self._strided):
             argtypes.append(ctypes.c_void_p if a["kind"] != "uniform" else _CTYPES[a["dtype"]])

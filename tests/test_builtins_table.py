@@ -64,6 +64,10 @@ SAMPLES: dict[str, tuple[str, str, str]] = {
                       "let u = Unpolarized(x);\n    let v = Unpolarized(y);\n"
                       "    let m = mueller(u, v, u, v, v, u, v, u, u, u, v, v, v, v, u, u);\n"
                       "    return mueller_entry(m, 2, 3) + mueller_entry(m * m, 1, 0);"),
+    # uniform across these inputs (no lane's y > 1e31, every lane's |x| < 1e30), so a lone
+    # lane (the interpreter) agrees with a vector of them
+    "any_lane": ("rgb", "Float", "return select(any_lane(y > 1e31), x, y) "
+                 "+ select(any_lane(abs(x) < 1e30), 1.0, 0.0);"),
     # ray queries need a scene: checked and lowered only
     "trace": ("rgb", "Float", "let h = trace(Ray { o: Vec3(x), d: Vec3(0.0, 0.0, 1.0), "
               "tmax: y });\n    return h.t;"),

@@ -25,9 +25,24 @@ fn mix(p: Vec3, uv: Vec2, s: Float, h: Probe, big: UInt64) -> (Vec4, Int, Bool, 
 SIZES = [5, 37, 10_007]  # a tail only; full vectors and a tail on every width; threads
 
 
-@pytest.fixture(scope="module", params=runnable_targets())
+@pytest.fixture(scope="module", params=[
+    pytest.param((t.values[0], how), marks=t.marks, id=f"{t.values[0]}-{how}")
+    for t in runnable_targets() for how in ("gathers", "shuffles")])
 def mix(request: Any) -> Any:
-    return rdsl.jit(SOURCE, target=request.param)["mix"]
+    """``mix`` has 19 arrays, more than SHUFFLED_ARRAYS_LIMIT: its strided loop gathers and
+    scatters.  The "shuffles" build raises the limit (and marks its source, so the kernel
+    cache keeps the two apart) to test the wide loads and shuffles that smaller kernels
+    use."""
+    from rdsl.compiler.backends import llvm_entry
+
+    target, how = request.param
+    if how == "gathers":
+        assert llvm_entry.SHUFFLED_ARRAYS_LIMIT < 19
+        return rdsl.jit(SOURCE, target=target)["mix"]
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(llvm_entry, "SHUFFLED_ARRAYS_LIMIT", 64)
+        return rdsl.jit(SOURCE + "// built with wide loads and shuffles\n",
+                        target=target)["mix"]
 
 
 def _data(n: int) -> dict[str, np.ndarray]:

@@ -160,6 +160,20 @@ def c_arg_names(args: list[CArg]) -> list[str]:
     return names
 
 
+def entry_args(fn: ir.Function) -> tuple[list[ir.Param], ir.Param, list[CArg], list[str], int]:
+    """What a C-like entry point's definition is made of: the kernel's params without the
+    mask, the mask param, the C arguments, their names in the definition and how many of
+    them are inputs.  The names are the header's with the prefix ``arg_``, which keeps
+    them apart from a body's locals (i, nl, em, k, vN, ...) whatever the params are."""
+    params, mask_param = split_params(fn)
+    if mask_param is None:
+        raise CompileError(f"kernel `{fn.name}` has no execution mask parameter "
+                           "(run vectorize first)", fn.loc)
+    args = c_args(fn)
+    names = ["arg_" + n for n in c_arg_names(args)]
+    return params, mask_param, args, names, sum(a.kind != "output" for a in args)
+
+
 def c_params(args: list[CArg]) -> list[tuple[str, str]]:
     """(C type, name) of every parameter of an entry point after ``n`` (or ``begin, end``):
     each argument, followed by ``int64_t <name>_stride`` when it is strided, then the mask

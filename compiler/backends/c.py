@@ -67,11 +67,23 @@ class SimdC(CLikePrinter):
     def select_raw(self, t: ir.ScalarType, m: str, a: str, b: str) -> str:
         """Bitwise select with ``m`` a mask of ``t``'s lane width (0 or -1 per lane)."""
         s = self.bits_type(t)
-        return f"(({self.ctype(t)})((({s}){a} & {m}) | (({s}){b} & ~{m})))"
+        sa, sb = self.reinterpret(s, a), self.reinterpret(s, b)
+        return self.reinterpret(self.ctype(t), f"(({sa} & {m}) | ({sb} & ~{m}))")
 
     def widen_mask(self, t: ir.ScalarType, m: str) -> str:
         """A varying bool (32-bit lanes) as a mask of ``t``'s lane width."""
-        return f"__builtin_convertvector({m}, rdsl_i64v)" if t.name == "u64" else m
+        return self.convert(m, "rdsl_i64v") if t.name == "u64" else m
+
+    def convert(self, expr: str, vtype: str) -> str:
+        """Vector ``expr`` converted lane by lane (value-preserving, C rules) to ``vtype``."""
+        return f"__builtin_convertvector({expr}, {vtype})"
+
+    def lane_ref(self, var: str, t: ir.ScalarType, k: str = "k") -> str:
+        """Lane ``k`` of vector variable ``var`` (of type ``t``), as an lvalue."""
+        return f"{var}[{k}]"
+
+    def vec_literal(self, vtype: str, items: list[str]) -> str:
+        return f"(({vtype}){{" + ", ".join(items) + "})"
 
     def select(self, t: ir.ScalarType, cond: ir.Value, a: str, b: str) -> str:
         if cond.type.lanes == 1 or t.lanes == 1:
@@ -86,7 +98,7 @@ class SimdC(CLikePrinter):
         r = super().render_cmp(ins)
         t = self.elem(ins)
         if t.lanes > 1 and t.name == "u64":  # 64-bit lanes -> the 32-bit mask
-            return f"__builtin_convertvector({r}, rdsl_i32v)"
+            return self.convert(r, "rdsl_i32v")
         return r
 
     def temp(self, t: ir.ScalarType | str, expr: str) -> str:
@@ -106,7 +118,8 @@ class SimdC(CLikePrinter):
             if div:
                 return f"({a} / {b})"
             r = self.declare(ins.result, None)
-            self.line(f"for (int k = 0; k < {self.W}; ++k) {r}[k] = fmodf({a}[k], {b}[k]);")
+            self.line(f"for (int k = 0; k < {self.W}; ++k) {self.lane_ref(r, t)} = "
+                      f"fmodf({self.lane_ref(a, t)}, {self.lane_ref(b, t)});")
             return None
         zero = self.temp(self.bits_type(t), f"({b} == 0)")
         bad = zero
@@ -130,10 +143,12 @@ class SimdC(CLikePrinter):
             return super().render_abs(ins)
         (a,) = self.operands(ins)
         if t.is_float:
-            return f"((rdsl_f32v)((rdsl_u32v){a} & 0x7fffffffu))"
+            return self.reinterpret("rdsl_f32v",
+                                    f"({self.reinterpret('rdsl_u32v', a)} & 0x7fffffffu)")
         if t.is_signed:
-            s = f"(rdsl_u32v)({a} >> 31)"
-            return f"((rdsl_i32v)(((rdsl_u32v){a} ^ {s}) - {s}))"
+            s = self.reinterpret("rdsl_u32v", f"({a} >> 31)")
+            ua = self.reinterpret("rdsl_u32v", a)
+            return self.reinterpret("rdsl_i32v", f"(({ua} ^ {s}) - {s})")
         return a
 
     # -- conversions ----------------------------------------------------------------------
@@ -147,20 +162,20 @@ class SimdC(CLikePrinter):
         if src.name == dst.name:
             return a
         if {src.name, dst.name} == {"i32", "u32"}:
-            return f"(({T}){a})"
+            return self.reinterpret(T, a)
         if dst.name == "bool":
             zero = "0.0f" if src.is_float else "0"
             r = f"({a} != {zero})"
-            return f"__builtin_convertvector({r}, rdsl_i32v)" if src.name == "u64" else r
+            return self.convert(r, "rdsl_i32v") if src.name == "u64" else r
         if src.name == "bool":
-            return f"__builtin_convertvector({a} & 1, {T})"
+            return self.convert(f"({a} & 1)", T)
         if src.is_float:
             return self.vector_saturate(a, dst)
         if src.name == "i32" and dst.name == "u64":
-            return f"((rdsl_u64v)__builtin_convertvector({a}, rdsl_i64v))"
+            return self.reinterpret("rdsl_u64v", self.convert(a, "rdsl_i64v"))
         if src.name == "u64" and dst.name == "i32":
-            return f"((rdsl_i32v)__builtin_convertvector({a}, rdsl_u32v))"
-        return f"__builtin_convertvector({a}, {T})"
+            return self.reinterpret("rdsl_i32v", self.convert(a, "rdsl_u32v"))
+        return self.convert(a, T)
 
     def vector_saturate(self, a: str, dst: ir.ScalarType) -> str:
         """f32 -> int truncating toward zero, saturating, NaN -> 0 (as LLVM's fpto*i.sat)."""
@@ -169,7 +184,7 @@ class SimdC(CLikePrinter):
         x = self.temp(f, self.select_raw(f, f"({a} > {below_hi})", self.splat(f, below_hi), a))
         x = self.temp(f, self.select_raw(f, f"({x} < {lo})", self.splat(f, lo), x))
         x = self.temp(f, self.select_raw(f, f"({x} != {x})", self.splat(f, "0.0f"), x))
-        r = self.temp(dst, f"__builtin_convertvector({x}, {self.ctype(dst)})")
+        r = self.temp(dst, self.convert(x, self.ctype(dst)))
         over = self.widen_mask(dst, f"({a} >= {hi})")
         return self.select_raw(dst, over, self.splat(dst, top), r)
 
@@ -177,7 +192,7 @@ class SimdC(CLikePrinter):
         if ins.type.lanes == 1:
             return super().render_bitcast(ins)
         (a,) = self.operands(ins)
-        return f"(({self.ctype(ins.type)}){a})"
+        return self.reinterpret(self.ctype(ins.type), a)
 
     # -- lanes and memory ----------------------------------------------------------------
     def render_any(self, ins: ir.Instr) -> str | None:
@@ -191,11 +206,13 @@ class SimdC(CLikePrinter):
     def render_lane(self, ins: ir.Instr) -> str:
         if ins.type.lanes == 1:
             return "0"
-        return "((rdsl_i32v){" + ", ".join(map(str, range(ins.type.lanes))) + "})"
+        return self.vec_literal("rdsl_i32v", [str(k) for k in range(ins.type.lanes)])
 
     def lane(self, value: ir.Value, k: str = "k") -> str:
         """Lane ``k`` of a value (a uniform value is the same in every lane)."""
-        return self.v(value) if value.type.lanes == 1 else f"{self.v(value)}[{k}]"
+        t = value.type
+        assert isinstance(t, ir.ScalarType)
+        return self.v(value) if t.lanes == 1 else self.lane_ref(self.v(value), t, k)
 
     def render_gather(self, ins: ir.Instr) -> str | None:
         if ins.type.lanes == 1:
@@ -205,7 +222,7 @@ class SimdC(CLikePrinter):
         r = self.declare(ins.result, None)
         loaded = self.mem_to_value(e, f"{self.v(buf)}[{self.lane(idx)}]", 2)
         self.line(f"for (int k = 0; k < {self.W}; ++k) "
-                  f"if ({self.lane(mask)}) {r}[k] = {loaded};")
+                  f"if ({self.lane(mask)}) {self.lane_ref(r, ins.type)} = {loaded};")
         return None
 
     def render_scatter(self, ins: ir.Instr) -> None:

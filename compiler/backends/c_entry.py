@@ -12,10 +12,9 @@ stored; uniform results are broadcast.  At W = 1 every value is a C scalar.
 from __future__ import annotations
 
 from .. import ir
-from ..diagnostics import CompileError
-from .base import CArg, c_arg_names, c_args, c_name, c_params, kernels, split_params
+from .base import CArg, c_name, c_params, entry_args, kernels
 from .c import VEC_NAMES, SimdC
-from .c_like import MEM_C, SCALAR_C, f32_literal
+from .c_like import MEM_C, SCALAR_C, table_decls
 
 _INTRINSICS = {  # W -> (guard, sqrt, floor, ceil, any) on x86
     4: ("defined(__SSE4_1__)", "_mm_sqrt_ps", "_mm_floor_ps", "_mm_ceil_ps",
@@ -100,25 +99,13 @@ def module_source(module: ir.Module, width: int, stem: str) -> str:
         bodies += lines
         tables.update(tabs)
     out = prelude(width, stem)
-    for name, values in tables.items():
-        out.append(f"static const float {name}[{len(values)}] = {{")
-        for k in range(0, len(values), 6):
-            out.append("    " + ", ".join(f32_literal(v) for v in values[k:k + 6]) + ",")
-        out.append("};")
+    out += table_decls(tables, "static const")
     return "\n".join(out + [""] + bodies) + "\n"
 
 
 # long: one straight sequence (arguments, loop head, inputs, body, outputs) per entry point
 def _kernel(fn: ir.Function, W: int) -> tuple[list[str], dict[str, list[float]]]:
-    params, mask_param = split_params(fn)
-    if mask_param is None:
-        raise CompileError(f"kernel `{fn.name}` has no execution mask parameter "
-                           "(run vectorize first)", fn.loc)
-    args = c_args(fn)
-    # the definition's parameters are the header's names with a prefix, which keeps them
-    # apart from the locals (i, nl, em, k, vN, ...) whatever the kernel's parameters are
-    names = ["arg_" + n for n in c_arg_names(args)]
-    n_in = sum(a.kind != "output" for a in args)
+    params, mask_param, args, names, n_in = entry_args(fn)
     cname = "rdsl_" + c_name(fn.name)
     cparams = [(t, n if n.startswith("mask") else "arg_" + n) for t, n in c_params(args)]
     proto = ", ".join(f"{t} {n}" for t, n in cparams)

@@ -1,4 +1,4 @@
-"""The C-like printer shared by the SIMD C backend (``c.py``) and, later, OpenCL C.
+"""The C-like printer shared by the SIMD C backend (``c.py``) and OpenCL C (``opencl.py``).
 
 It prints the body of one kernel, post-vectorize scalar IR, as C statements: one variable
 per SSA value (``T vN = expr;``), structured ``if`` as C ``if``/``else`` assigning the
@@ -55,6 +55,18 @@ def int_literal(value: Any, dtype: str) -> str:
             v -= 1 << 32
         return "(-2147483647 - 1)" if v == -(1 << 31) else (f"({v})" if v < 0 else str(v))
     return f"{v}u" if dtype == "u32" else f"{v}ull"
+
+
+def table_decls(tables: dict[str, list[float]], qualifier: str) -> list[str]:
+    """File-scope declarations of read-only f32 tables (``qualifier``: ``static const`` in
+    C, ``__constant`` in OpenCL C)."""
+    out = []
+    for name, values in tables.items():
+        out.append(f"{qualifier} float {name}[{len(values)}] = {{")
+        for k in range(0, len(values), 6):
+            out.append("    " + ", ".join(f32_literal(v) for v in values[k:k + 6]) + ",")
+        out.append("};")
+    return out
 
 
 class CLikePrinter:
@@ -210,8 +222,14 @@ class CLikePrinter:
         if t.name != "i32":
             return f"({op}{a})" if b is None else f"({a} {op} {b})"
         u = self.ctype(ir.ScalarType("u32", lanes=t.lanes))
-        r = f"({op}({u}){a})" if b is None else f"(({u}){a} {op} ({u}){b})"
-        return f"(({self.ctype(t)}){r})"
+        ua = self.reinterpret(u, a)
+        r = f"({op}{ua})" if b is None else f"({ua} {op} {self.reinterpret(u, b)})"
+        return self.reinterpret(self.ctype(t), r)
+
+    def reinterpret(self, ctype: str, expr: str) -> str:
+        """``expr`` as C type ``ctype`` of the same size, bit for bit (a C cast: vector
+        extensions cast vectors bitwise, and i32 <-> u32 wraps)."""
+        return f"(({ctype}){expr})"
 
     def render_arith(self, ins: ir.Instr) -> str:
         a, b = self.operands(ins)
@@ -381,10 +399,14 @@ class CLikePrinter:
 
     def render_ray(self, ins: ir.Instr) -> None:
         what = "trace" if ins.op is ir.Op.INTERSECT else "occluded"
-        raise CompileError(f"the {self.target_name} backend cannot trace rays: `{what}` (IR "
+        raise NoRayTracer(f"the {self.target_name} backend cannot trace rays: `{what}` (IR "
                            f"`{ins.op.value}`) needs Embree, which only the LLVM CPU targets "
                            "link (a BVH written in rdsl is not there yet); compile this "
                            "kernel for scalar, sse4, avx2 or avx512", ins.loc)
+
+
+class NoRayTracer(CompileError):
+    """A kernel traces rays on a target that has no ray tracer (no Embree; no BVH in rdsl)."""
 
 
 def saturation(dst: ir.ScalarType) -> tuple[str, str, str, str]:

@@ -180,6 +180,10 @@ def build_library(module: ir.Module, target: Target | str, out_dir: str | os.Pat
 
     Returns ``{"so": path, "header": path, "manifest": path}``."""
     t = get_target(target)
+    if t.backend == "opencl":  # <stem>.cl and <stem>.json, no library
+        from .opencl import build_opencl_library
+
+        return build_opencl_library(module, t, out_dir, stem)
     if t.backend == "c":
         from .c_build import build_c_library
 

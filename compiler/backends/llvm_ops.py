@@ -130,7 +130,7 @@ class Lowering:
             if ins.op is ir.Op.RETURN:
                 self.ret([self.v(o) for o in ins.operands])
                 return None
-            lower = LOWER.get(ins.op)
+            lower = getattr(self.m, "rules", LOWER).get(ins.op)  # a target's own, or LOWER
             if lower is None:
                 raise CompileError(f"the LLVM backend cannot lower `{ins.op.value}` "
                                    "(it must be removed by an earlier pass)", ins.loc)

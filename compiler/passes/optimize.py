@@ -164,7 +164,8 @@ class _Simplifier:
     def __init__(self) -> None:
         self.repl: dict[Value, Value] = {}
         self.consts: dict[Value, Any] = {}
-        self.scopes: list[dict[Any, Value]] = []
+        self.seen: dict[Any, Value] = {}  # CSE table of every enclosing scope
+        self.scopes: list[list[Any]] = []  # the keys each open scope added to `seen`
         self.changed = False
         self.speculating = False
 
@@ -174,7 +175,7 @@ class _Simplifier:
         return v
 
     def block(self, block: Block) -> None:
-        self.scopes.append({})
+        self.scopes.append([])
         work = deque(block.instrs)
         out: list[Instr] = []
         while work:
@@ -202,7 +203,8 @@ class _Simplifier:
                 continue
             out.append(ins)
         block.instrs = out
-        self.scopes.pop()
+        for key in self.scopes.pop():
+            del self.seen[key]
 
     def peel(self, loop: Instr) -> list[Instr] | None:
         """If the loop's continue flag is a constant false on the first iteration, return the
@@ -235,12 +237,13 @@ class _Simplifier:
             self.changed = True
             return False
         key = (ins.op, tuple(ins.operands), _attr_key(ins.attrs), ins.result.type)
-        for scope in reversed(self.scopes):
-            if key in scope:
-                self.repl[ins.result] = scope[key]
-                self.changed = True
-                return False
-        self.scopes[-1][key] = ins.result
+        known = self.seen.get(key)
+        if known is not None:
+            self.repl[ins.result] = known
+            self.changed = True
+            return False
+        self.seen[key] = ins.result
+        self.scopes[-1].append(key)
         if ins.op is Op.CONST and "trait" not in ins.attrs and "value" in ins.attrs:
             try:
                 self.consts[ins.result] = coerce(ins.attrs["value"], ins.result.type)

@@ -96,6 +96,7 @@ TEXTURE_PLACEHOLDER = "scene_texture_eval"
 TEXTURE_PLACEHOLDER_1 = "scene_texture_eval_1"
 EMITTER_KIND_PLACEHOLDER = "scene_has_emitter_kind"  # folded to the scene's emitter kinds
 SHAPE_KIND_PLACEHOLDER = "scene_has_shape_kind"  # folded to the scene's shape kinds
+ACCEL_PLACEHOLDER = "scene_uses_bvh"  # folded to the scene's choice of ray tracing
 PARAM_BUFFER = "PRM"  # the generic build's parameter buffer
 
 
@@ -154,7 +155,8 @@ def parameter_slots(scene: SceneSpec, model: ColorModel = RGB
 
     # emitter_kinds and shape_kinds stay None: the generic build handles every kind
     spec = SceneSpec(instances("bsdfs"), instances("emitters"), instances("textures"),
-                     instances("bsdf_leaves"), integrators=instances("integrators"))
+                     instances("bsdf_leaves"), integrators=instances("integrators"),
+                     accel=scene.accel)
     return spec, np.asarray(values, np.float32)
 
 
@@ -196,6 +198,9 @@ class Specialize(Pass):
             kinds = module.functions.get(name)
             if kinds is not None and present is not None:
                 kinds.body = _kind_test(kinds, present)
+        accel = module.functions.get(ACCEL_PLACEHOLDER)
+        if accel is not None:
+            accel.body = _constant_body(accel, self.scene.accel == "bvh")
         for fn in list(module.functions.values()):
             self._bind_calls(module, fn, fn.body)
         self._read_tables(module)
@@ -486,6 +491,14 @@ def _kind_test(fn: Function, kinds: tuple[int, ...]) -> Block:
     for k in sorted(set(kinds)):
         out = b.op(Op.OR, BOOL, out, b.op(Op.EQ, BOOL, kind, b.const(int(k), I32)))
     b.emit(Op.RETURN, [out], [])
+    return body
+
+
+def _constant_body(fn: Function, value: bool) -> Block:
+    """``return value``."""
+    body = Block()
+    b = Builder(body, fn.loc)
+    b.emit(Op.RETURN, [b.const(value, BOOL)], [])
     return body
 
 

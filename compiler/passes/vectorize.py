@@ -125,8 +125,9 @@ class _FunctionVectorizer:
                         changed |= self._mark(arg)
                         changed |= self._mark(res)
                 changed |= self._analyze_block(body)
-            elif ins.results and (ins.op in (Op.INTERSECT, Op.OCCLUDED)
-                                  or any(v in self.varying for v in ins.operands)):
+            elif ins.results and ins.op is not Op.ANY and (
+                    ins.op in (Op.INTERSECT, Op.OCCLUDED)
+                    or any(v in self.varying for v in ins.operands)):
                 for r in ins.results:
                     changed |= self._mark(r)
         return changed
@@ -206,6 +207,10 @@ class _FunctionVectorizer:
                          ins.attrs)
             for r, n in zip(ins.results, new.results):
                 self.env[r] = n
+            return
+        if op is Op.ANY and ins.operands[0] in self.varying:  # any_lane: of active lanes
+            active = b.op(Op.AND, mask.type, self.env[ins.operands[0]], mask)
+            self.env[ins.result] = b.op(Op.ANY, ins.result.type, active)
             return
         is_varying = any(r in self.varying for r in ins.results)
         ops = [self._get(b, v, is_varying) for v in ins.operands]

@@ -42,6 +42,10 @@ def add_commands(sub: argparse._SubParsersAction) -> dict[str, Callable[[Any], i
                         "every emitter kind (default: specialized, generic with --watch)")
     r.add_argument("--triangulate", action="store_true",
                    help="render spheres and disks as triangle meshes, not analytic shapes")
+    r.add_argument("--accel", choices=("embree", "bvh"), default=None,
+                   help="trace rays with Embree (the default on CPU targets) or with the BVH "
+                        "written in rdsl (stdlib/render/bvh.rdsl; the default on opencl, "
+                        "spirv and ptx)")
     r.add_argument("--plugins", action="append", default=[], metavar="DIR",
                    help="a folder (or .rdsl file) of BSDF, texture and emitter plugins, "
                         "searched after the scene's folder (repeatable; also "
@@ -58,6 +62,16 @@ def render_command(args: Any) -> int:
     from ..scene.xml import parse_defines
     from .renderer import load_scene
 
+    if args.target == "ptx":  # a CUDA GPU runs the kernels, or nothing does
+        from ...compiler.targets import ptx_target
+        from ..cuda import cuda_status, device_arch
+
+        reason = cuda_status()
+        if reason is not None:
+            print(f"rdsl render: --target ptx needs a CUDA GPU: {reason}", file=sys.stderr)
+            return 1
+        args.target = ptx_target(device_arch())
+        args.accel = "bvh"  # Embree runs on the CPU: GPU rays go through the BVH in rdsl
     build = Build.of(args.target, args.variant)  # a bad name fails before the scene loads
     scene_path = Path(args.scene)
     if not scene_path.is_file():
@@ -77,7 +91,8 @@ def render_command(args: Any) -> int:
     t0 = time.perf_counter()
     scene = load_scene(scene_path, build=build, specialize=specialize,
                        triangulate=getattr(args, "triangulate", False),
-                       plugins=getattr(args, "plugins", []), **defines)
+                       plugins=getattr(args, "plugins", []),
+                       accel=getattr(args, "accel", None), **defines)
     t_load = time.perf_counter() - t0
     integ = scene.desc.integrator
     lit = [i for i in [integ, *integ.children] if i.type in ("path", "direct")

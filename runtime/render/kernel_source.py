@@ -40,7 +40,7 @@ __all__ = ["SCENE_BUFFERS", "kernel_source", "literal", "scene_plugins"]
 TEMPLATE = Path(__file__).resolve().parents[2] / "stdlib" / "render" / "kernel.rdsl.in"
 # the buffers of a `Scene` (stdlib/render/integrator.rdsl), the kernel's arguments of the
 # same names
-SCENE_BUFFERS = ("P", "N", "UV", "F", "G", "LC", "LT", "T", "EK", "E", "ENV")
+SCENE_BUFFERS = ("P", "N", "UV", "F", "G", "LC", "LT", "T", "EK", "E", "ENV", "BV", "BI")
 # the scene's sampler -> the `kind` of stdlib/render/integrator.rdsl's Sampler
 SAMPLER_KINDS = {"independent": 0, "stratified": 1, "multijitter": 3, "orthogonal": 4,
                  "ldsampler": 6}

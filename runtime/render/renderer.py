@@ -21,6 +21,7 @@ from typing import Any
 
 import numpy as np
 
+from ...compiler.backends.c_like import NoRayTracer
 from ...compiler.build import Build
 from ...compiler.diagnostics import CompileError
 from ...compiler.passes.ad_forward import TANGENT_BUFFER
@@ -32,6 +33,7 @@ from ..tables import fill_tables
 from ..scene import load_scene_description
 from ..scene.reads import recording
 from ..scene.samplers import sample_count
+from .bvh import scene_bvh
 from .bsdfs import (
     bsdf_instance,
     dispersion_warnings,
@@ -52,6 +54,7 @@ from .shapes import KINDS as SHAPE_KINDS
 from .shapes import RECORD, shape_record, user_geometry
 from .textures import TextureTable
 
+ACCELS = ("embree", "bvh")  # how rays are traced (`--accel`)
 # samples per kernel call: small enough that a batch's sample buffers stay in cache
 BATCH_SAMPLES = 1 << 17
 
@@ -74,6 +77,9 @@ class SceneBuffers:
     meshes: list[tuple[np.ndarray, np.ndarray]] = field(default_factory=list)
     T: np.ndarray = field(default_factory=lambda: np.zeros(3, np.float32))  # texels
     textures: list[Instance] = field(default_factory=list)
+    # the BVH of `--accel bvh` (stdlib/render/bvh.rdsl; an empty tree with Embree)
+    BV: np.ndarray = field(default_factory=lambda: np.zeros(1, np.float32))
+    BI: np.ndarray = field(default_factory=lambda: np.zeros(4, np.int32))
 
     @property
     def nlight(self) -> int:
@@ -82,7 +88,7 @@ class SceneBuffers:
 
     def args(self) -> list[np.ndarray]:
         return [self.P, self.N, self.UV, self.F, self.G, self.lights.LC, self.lights.LT,
-                self.T, *self.lights.args()]
+                self.T, *self.lights.args(), self.BV, self.BI]
 
 
 def _flat(v: np.ndarray, f: np.ndarray, normals: Any) -> bool:
@@ -217,8 +223,14 @@ class Scene:
     tangents: np.ndarray | None = None  # its dPRM
 
     def __init__(self, path: str | Path, build: Build, specialize: bool = True,
-                 triangulate: bool = False, plugins: Any = (), **defaults: Any) -> None:
+                 triangulate: bool = False, plugins: Any = (), accel: str | None = None,
+                 **defaults: Any) -> None:
+        if accel is None:  # Embree runs on the CPU; other devices trace through the rdsl BVH
+            accel = "embree" if build.target.backend in ("llvm", "c") else "bvh"
+        if accel not in ACCELS:
+            raise CompileError(f"unknown accel `{accel}` (valid: {', '.join(ACCELS)})")
         self.path = Path(path)
+        self.accel = accel
         self.build = build
         self.specialize = specialize
         self.triangulate = triangulate
@@ -234,7 +246,7 @@ class Scene:
         new = Scene.__new__(Scene)
         new.path, new.build, new.specialize = self.path, self.build, self.specialize
         new.triangulate, new.defaults = self.triangulate, self.defaults
-        new.plugins = self.plugins
+        new.plugins, new.accel = self.plugins, self.accel
         new._read(self)
         return new
 
@@ -262,8 +274,12 @@ class Scene:
         self.geometry_key = _geometry_key(self.buffers)
         self.geometry_reused = previous is not None and \
             previous.geometry_key == self.geometry_key
+        self.embree = self.bvh = None
         if self.geometry_reused:
-            self.embree = previous.embree
+            self.embree, self.bvh = previous.embree, previous.bvh
+            self.buffers.BV, self.buffers.BI = previous.buffers.BV, previous.buffers.BI
+        elif self.accel == "bvh":  # traversal in rdsl (stdlib/render/bvh.rdsl)
+            self.buffers.BV, self.buffers.BI, self.bvh = scene_bvh(self.buffers)
         else:
             # two levels (a BVH per shape under one over the shapes): scenes of a few large
             # shapes, such as the Cornell box, trace about a third faster than through one
@@ -284,6 +300,24 @@ class Scene:
 
         if self._module is not None and not again:
             return self._module
+        src, scene, filename = self._kernel_inputs()
+        try:
+            mod = jit(src, build=self.build, scene=scene, search_paths=self.search_paths,
+                      filename=filename)
+        except NoRayTracer:  # one line: what is missing, not the integrator's source
+            raise CompileError(_no_ray_tracer(self.path, self.build.target.name)) from None
+        if not self.specialize:  # and so do the tables the plugins compute per scene
+            self.prm = fill_tables(mod, self.scene_spec, self.prm, src, filename,
+                                   self.search_paths)
+        self._module = mod
+        self.compile_seconds = mod.compile_seconds
+        self.from_cache = mod.from_cache
+        return mod
+
+    def _kernel_inputs(self) -> tuple[str, SceneSpec, str]:
+        """The render kernel's source, what specialize is told about the scene, and the
+        file name its diagnostics show; sets the report, kernel_src, scene_spec and
+        search_paths (and PRM, for the generic build)."""
         src = kernel_source(self.desc, self.buffers, self.bsdfs, self.emitters,
                             self.build.model, derivative=self.derivative)
         scene = self.scene_spec_for_params()
@@ -297,16 +331,17 @@ class Scene:
             scene, prm = parameter_slots(scene, self.build.model)
             if not self._prm_set:
                 self.prm = prm
-        filename = str(self.path.with_suffix(".rdsl"))
-        mod = jit(src, build=self.build, scene=scene, search_paths=self.search_paths,
-                  filename=filename)
-        if not self.specialize:  # and so do the tables the plugins compute per scene
-            self.prm = fill_tables(mod, self.scene_spec, self.prm, src, filename,
-                                   self.search_paths)
-        self._module = mod
-        self.compile_seconds = mod.compile_seconds
-        self.from_cache = mod.from_cache
-        return mod
+        return src, scene, str(self.path.with_suffix(".rdsl"))
+
+    def kernel_ir(self) -> Any:
+        """The render kernels as IR after the whole pipeline for this scene's build (no
+        library: what ``emit_ptx`` or ``rdsl compile`` of another target starts from)."""
+        from ...compiler.driver import compile_kernels
+
+        src, scene, filename = self._kernel_inputs()
+        module, _ = compile_kernels(src, self.build, scene=scene, filename=filename,
+                                    search_paths=self.search_paths)
+        return module
 
     def scene_spec_for_params(self) -> SceneSpec:
         """What ``specialize`` is told about the scene: its instances and kinds."""
@@ -314,7 +349,7 @@ class Scene:
         kinds = tuple(sorted({int(k) for k in self.buffers.lights.EK[0::4]}))
         shapes = tuple(sorted({_shape_kind(int(g)) for g in self.buffers.G[3::4]}))
         return SceneSpec(bsdfs, self.emitters, self.buffers.textures, leaves, kinds, shapes,
-                         integrator_instances(self.desc.integrator))
+                         integrator_instances(self.desc.integrator), self.accel)
 
     @property
     def params(self) -> SceneParams:
@@ -358,6 +393,9 @@ class Scene:
         sky = ("none, the miss branch folds away" if env < 0
                else f"emitter {env} ({kinds[int(self.buffers.lights.EK[4 * env])]})")
         lines = [f"textures: {len(scene.textures)} ({plugins})", f"environment: {sky}"]
+        if self.bvh is not None:
+            lines.append(f"accel: bvh, {self.bvh.nodes} nodes over {len(self.bvh.prims)} "
+                         f"primitives, built in {self.bvh.build_seconds:.2f} s")
         if self.specialize:
             folded = f"sampling code for {lacks} folded away"
             return [f"parameters: {len(values)} values of {n} instance(s) folded as constants",
@@ -405,11 +443,17 @@ class Scene:
         seed = self.seed if seed is None else int(seed)
         mod = self.compile()
         if mod.traces_rays:  # a path tracer with max_depth 0 traces none: its image is black
+            if self.embree is None:
+                raise CompileError("the render kernel traces rays through Embree, but the "
+                                   f"scene was loaded with accel `{self.accel}`")
             mod.bind_scene(self.embree)
         film = film_uniforms(self.desc.sensor.film, 1, channels=len(self.channel_names))
         cells = film["grid_w"] * film["grid_h"]
         batch = max(1, min(spp, BATCH_SAMPLES // max(cells, 1)))
         acc = new_accumulator(dict(film, spp=batch))
+        scene_args = self._scene_args(mod)
+        if hasattr(mod, "resident"):  # OpenCL: the film is accumulated on the device
+            acc = mod.resident(acc)
         pixels = np.arange(film["crop_w"] * film["crop_h"], dtype=np.int32)
         self.nonfinite = 0
         bar = Progress(spp, label="rendering", unit="spp", enabled=progress)
@@ -428,7 +472,7 @@ class Scene:
                 if n != batch:  # the last, smaller batch
                     outs = [None, None]
                 rs = np.array([done, spp, seed_bits], np.int32)
-                job = mod["render_sample"](j[:cells * n], rs, *self.buffers.args(),
+                job = mod["render_sample"](j[:cells * n], rs, *scene_args,
                                            *self._param_args(mod), threads=threads,
                                            out=outs[k % 2], wait=False)
             if waiting is not None:
@@ -448,7 +492,28 @@ class Scene:
                     bar.finish()
                     raise RenderCancelled(f"cancelled after {done} of {spp} spp")
         bar.finish()
-        return develop(acc, dict(film, spp=spp))
+        return develop(acc.get() if hasattr(acc, "get") else acc, dict(film, spp=spp))
+
+    def _scene_args(self, mod: Any) -> list[Any]:
+        """The scene's buffers for ``mod``'s kernels: the arrays, or on a device target
+        (``mod.resident``: OpenCL) their copies on the device, made once per module."""
+        if not hasattr(mod, "resident"):
+            return self.buffers.args()
+        if getattr(self, "_resident", (None,))[0] is not mod:
+            self._resident = (mod, [mod.resident(b) for b in self.buffers.args()])
+        return self._resident[1]
+
+
+def _no_ray_tracer(path: Path, target: str) -> str:
+    """What a scene that traces rays lacks on a target without Embree."""
+    from ...compiler.sources import STDLIB
+
+    if (STDLIB / "render" / "bvh.rdsl").is_file():
+        return (f"{path.name}: the scene traces rays, which target `{target}` does with the "
+                "BVH written in rdsl only: render with --accel bvh")
+    return (f"{path.name}: the scene traces rays, and target `{target}` has no ray tracer "
+            "yet (it needs the BVH written in rdsl, stdlib/render/bvh.rdsl, which this build "
+            "lacks); render with an LLVM target (--target host)")
 
 
 def _film_samples(out: dict[str, Any], ns: int) -> np.ndarray:
@@ -470,16 +535,19 @@ def _film_samples(out: dict[str, Any], ns: int) -> np.ndarray:
 def load_scene(path: str | Path, variant: str | ColorModel = "rgb",
                target: str | Target = "host", specialize: bool = True,
                triangulate: bool = False, *, build: Build | None = None,
-               plugins: Any = (), **defaults: Any) -> Scene:
+               plugins: Any = (), accel: str | None = None, **defaults: Any) -> Scene:
     """Load a Mitsuba 3 XML scene for rendering (``-D name=value`` as keyword args).
     ``specialize=False`` gives the generic build (parameters read at run time).  ``build``,
     when given, replaces ``variant`` and ``target``; a bad name of either is a diagnostic
     before the scene is read.  ``plugins``: folders (or ``.rdsl`` files) searched for the
     scene's BSDF, texture and emitter plugins after the scene's own folder and before
-    ``$RDSL_PLUGIN_PATH``, the registered plugins and the stdlib (docs/plugins.md)."""
+    ``$RDSL_PLUGIN_PATH``, the registered plugins and the stdlib (docs/plugins.md).
+    ``accel``: "embree" (the default on CPU targets) traces rays with Embree, "bvh" (the
+    default on opencl, spirv and ptx) with the BVH written in rdsl (stdlib/render/bvh.rdsl,
+    built by runtime/render/bvh.py)."""
     build = build or Build.of(target, variant)
     return Scene(path, build, specialize=specialize, triangulate=triangulate,
-                 plugins=plugins, **defaults)
+                 plugins=plugins, accel=accel, **defaults)
 
 
 def load_dict(scene: dict, variant: str | ColorModel = "rgb", target: str | Target = "host",

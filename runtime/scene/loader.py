@@ -150,8 +150,7 @@ class _Builder:
             if cat == "integrator":
                 integrators.append(obj)
             elif cat == "sensor":
-                top_level_sensor(obj, ch.loc)
-                sensors.append(obj)
+                sensors.append(top_level_sensor(obj, ch.loc))
             elif cat == "shape":
                 shapes.append(obj)
                 sensors += [obj.sensor] if obj.sensor is not None else []
@@ -356,8 +355,7 @@ class _Builder:
         elif obj.type in ("rectangle", "cube", "disk"):
             mesh = getattr(meshes, obj.type)()
         elif obj.type == "cylinder":
-            m = m @ cylinder_frame(p, lambda k: _loc(node, k))
-            mesh = cylinder_mesh()
+            m, mesh = m @ cylinder_frame(p, lambda k: _loc(node, k)), cylinder_mesh()
         else:
             path = self.file(node, "filename", "mesh")
             try:
@@ -382,7 +380,10 @@ class _Builder:
                               "the transformed mesh instead", stacklevel=2)
         face_normals = bool(p.get("face_normals") or mesh.face_normals)
         p["to_world"] = m
-        obj.mesh = meshes.to_world(mesh, m, p["flip_normals"], face_normals)
+        try:
+            obj.mesh = meshes.to_world(mesh, m, p["flip_normals"], face_normals)
+        except MeshError as e:
+            raise scene_error(f"{self.what(node)}: {e}", _loc(node, "to_world")) from None
         bsdfs, ems = objects["bsdf"], objects["emitter"]
         # Mitsuba's default (shape.cpp): diffuse, black on an emitter's shape
         obj.bsdf = bsdfs[0][0] if bsdfs else self.default(
@@ -394,8 +395,7 @@ class _Builder:
                                   f"'{em.type}'", ch.loc)
             obj.emitter = em
         if objects.get("sensor"):
-            attach_meter(obj, objects["sensor"][0][0], objects["sensor"][0][1].loc)
-            obj.sensor = objects["sensor"][0][0]
+            attach_meter(obj, *objects["sensor"][0])
 
     def finish_bsdf(self, obj: Plugin, node: ObjectNode, objects: dict) -> None:
         p = obj.params

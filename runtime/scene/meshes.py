@@ -16,6 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ...dsl.parser import F32_OVERFLOW
 from . import transform as xf
 
 
@@ -83,6 +84,9 @@ def to_world(mesh: Mesh, m: np.ndarray, flip_normals: bool = False,
              face_normals: bool = False) -> Mesh:
     """Transform to world space; flip the winding and normals; drop normals for faceting."""
     v = xf.apply_points(m, mesh.vertices)
+    if not np.all(np.abs(v) < F32_OVERFLOW):  # NaN fails this too
+        raise MeshError("its vertices in world space are not finite 32-bit floats (check "
+                        "'to_world' and the shape's size)")
     f = mesh.faces
     if np.linalg.det(m[:3, :3]) < 0:
         f = f[:, [0, 2, 1]]  # a mirroring transform would turn the surface inside out

@@ -76,9 +76,10 @@ def _radiancemeter(p: dict[str, Any], to_world: bool, loc: Callable[[str], Loc])
     p["origin"], p["direction"] = m[:3, 3].copy(), d
 
 
-def attach_meter(shape: Any, sensor: Any, loc: Loc) -> None:
-    """Nest the sensor ``sensor`` in ``shape``: only an irradiancemeter, on a shape whose
-    surface the kernel samples (a rectangle, a disk or a sphere)."""
+def attach_meter(shape: Any, sensor: Any, child: Any) -> None:
+    """Nest the sensor ``sensor`` (the XML ``child``) in ``shape``: only an irradiancemeter,
+    on a shape whose surface the kernel samples (a rectangle, a disk or a sphere)."""
+    loc = child.loc
     if sensor.type != "irradiancemeter":
         raise scene_error(f"only an 'irradiancemeter' sensor can be nested in a <shape>, not "
                           f"'{sensor.type}'", loc)
@@ -86,11 +87,12 @@ def attach_meter(shape: Any, sensor: Any, loc: Loc) -> None:
         raise scene_error(f"irradiancemeter: rdsl measures the irradiance on a "
                           f"{', '.join(METER_SHAPES[:-1])} or {METER_SHAPES[-1]}, not on a "
                           f"'{shape.type}' shape", loc)
-    sensor.shape = shape
+    sensor.shape, shape.sensor = shape, sensor
 
 
-def top_level_sensor(sensor: Any, loc: Loc) -> None:
+def top_level_sensor(sensor: Any, loc: Loc) -> Any:
     """A sensor directly inside <scene>: not an irradiancemeter, which measures a shape."""
     if sensor.type == "irradiancemeter":
         raise scene_error("an 'irradiancemeter' must be nested inside the <shape> whose "
                           "irradiance it measures", loc)
+    return sensor
