@@ -263,8 +263,9 @@ def test_envmap_sampling_matches_its_pdf():
 # ---- bad input --------------------------------------------------------------------------
 
 @pytest.mark.parametrize("emitter, message", [
-    ("""<emitter type="spot"><texture type="checkerboard" name="texture"/></emitter>""",
-     "textured spot light"),
+    ("""<emitter type="spot"><texture type="checkerboard" name="texture"/>
+        <float name="cutoff_angle" value="100"/></emitter>""",
+     "a projected 'texture' needs a 'cutoff_angle' below 90 degrees"),
     ("""<emitter type="spot"><float name="cutoff_angle" value="10"/>
         <float name="beam_width" value="20"/></emitter>""", "'beam_width'"),
     ("""<emitter type="point"><texture type="checkerboard" name="intensity"/></emitter>""",

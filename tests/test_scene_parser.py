@@ -52,8 +52,8 @@ BAD_SCENES = {
     "bad_attribute_syntax": (['<shape type=cube/>'], 2, "malformed XML: not well-formed"),
     "unknown_element": (['<camera type="perspective"/>'], 2,
                         "unknown element <camera>; accepted: shape, bsdf"),
-    "unknown_shape": (['<shape type="cylinder"/>'], 2,
-                      "unknown shape plugin 'cylinder'; accepted: rectangle, cube, disk, sphere"),
+    "unknown_shape": (['<shape type="torus"/>'], 2,
+                      "unknown shape plugin 'torus'; accepted: rectangle, cube, disk, sphere"),
     "unknown_bsdf": (['<bsdf type="hair" id="p"/>'], 2,
                      "unknown bsdf plugin 'hair'; accepted: diffuse, conductor"),
     "unknown_emitter": (['<emitter type="sunsky"/>'], 2, "unknown emitter plugin 'sunsky'"),
@@ -147,8 +147,7 @@ BAD_SCENES = {
     "point_in_shape": (['<shape type="cube">', '    <emitter type="point"/>', '</shape>'], 3,
                        "only an 'area' emitter can be attached to a shape, not 'point'"),
     "sensor_in_shape": (['<shape type="cube">', '    <sensor type="perspective"/>', '</shape>'],
-                        3, ("shape 'cube' does not accept a nested <sensor>; it accepts <bsdf>, "
-                           "<emitter>")),
+                        3, "only an 'irradiancemeter' sensor can be nested in a <shape>"),
     "film_at_top": (['<film type="hdrfilm"/>'], 2,
                     "<film> cannot appear directly inside <scene>; nest it inside <sensor>"),
     "bad_crop": (['<sensor type="perspective">', '    <film type="hdrfilm">',
@@ -159,9 +158,9 @@ BAD_SCENES = {
     "unknown_rfilter": (['<sensor type="perspective">', '    <film type="hdrfilm">',
                          '        <rfilter type="lanczos"/>', '    </film>', '</sensor>'], 4,
                         "unknown rfilter plugin 'lanczos'; accepted: box, tent, gaussian"),
-    "unknown_sampler": (['<sensor type="perspective">', '    <sampler type="ldsampler"/>',
-                         '</sensor>'], 3, ("unknown sampler plugin 'ldsampler'; accepted: "
-                                          "independent, stratified, multijitter")),
+    "unknown_sampler": (['<sensor type="perspective">', '    <sampler type="sobol"/>',
+                         '</sensor>'], 3, ("unknown sampler plugin 'sobol'; accepted: "
+                                          "independent, stratified, multijitter, orthogonal")),
     "fov_and_focal": (['<sensor type="perspective">', '    <float name="fov" value="45"/>',
                        '    <string name="focal_length" value="35mm"/>', '</sensor>'], 3,
                       "give either 'fov' or 'focal_length', not both"),
@@ -216,7 +215,7 @@ def test_error_quotes_line_with_caret(tmp_path: Path) -> None:
         load(path)
     lines = str(exc.value).splitlines()
     assert lines[0] == (f"{path}:2:3: error: unknown shape plugin 'torus'; accepted: rectangle, "
-                        "cube, disk, sphere, obj, ply, serialized")
+                        "cube, disk, sphere, cylinder, obj, ply, serialized")
     assert lines[1].strip() == '<shape type="torus"/>'
     assert lines[2].index("^") == lines[1].index("<")
 

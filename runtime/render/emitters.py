@@ -64,7 +64,7 @@ def _linear_part(m: np.ndarray, what: str, loc: Any, rigid: bool) -> np.ndarray:
 def emitter_tables(desc: Any, lights: list[tuple[int, int, float]],
                    area_emitters: int,
                    analytic: dict[int, tuple[int, int, float]] | None = None,
-                   model: ColorModel = RGB) -> EmitterTables:
+                   model: ColorModel = RGB, textures: Any = None) -> EmitterTables:
     """Tables for the scene's emitters.  ``lights`` holds (triangle, shape, area) for every
     triangle of the area-lit shapes, in shape order; ``area_emitters`` counts those shapes.
     An area-lit analytic shape is a single entry (-1, shape, area) of ``lights``, and
@@ -107,7 +107,7 @@ def emitter_tables(desc: Any, lights: list[tuple[int, int, float]],
                 raise CompileError(f"{what}: only one environment emitter (constant or "
                                    "envmap) can be specified per scene", em.loc)
             env = len(EK)
-        row, table = _emitter_row(em, what, model)
+        row, table = _emitter_row(em, what, model, textures)
         if table is not None:
             ENV = table
         EK.append((KINDS[em.type], 0, 0, 0))
@@ -126,17 +126,15 @@ def _put_color(row: np.ndarray, value: Any, what: str, loc: Any, model: ColorMod
     row[0:3], row[23] = emission_row(_color(value, what, loc), model)
 
 
-def _emitter_row(em: Any, what: str, model: ColorModel = RGB
+def _emitter_row(em: Any, what: str, model: ColorModel = RGB, textures: Any = None
                  ) -> tuple[np.ndarray, np.ndarray | None]:
-    """The E row of one non-area emitter, and its ENV table for an envmap."""
+    """The E row of one non-area emitter, and its ENV table for an envmap; ``textures``
+    (the scene's TextureTable) takes a spot light's projected texture."""
     p, row = em.params, np.zeros(STRIDE)
     if em.type == "point":
         _put_color(row, p["intensity"], f"{what}: 'intensity'", em.loc, model)
         row[3:6] = p["to_world"][:3, 3]
     elif em.type == "spot":
-        if p.get("texture") is not None:
-            raise CompileError(f"{what}: a textured spot light ('texture') is not supported by "
-                               "the renderer yet", em.loc)
         cutoff, beam = np.radians(p["cutoff_angle"]), np.radians(p["beam_width"])
         if not 0.0 < cutoff <= np.pi:
             raise CompileError(f"{what}: 'cutoff_angle' must be in (0, 180] degrees, got "
@@ -150,6 +148,15 @@ def _emitter_row(em: Any, what: str, model: ColorModel = RGB
         row[6:15] = np.linalg.inv(lin).reshape(-1)
         row[15:19] = (np.cos(cutoff), np.cos(beam), cutoff,
                       1.0 / (cutoff - beam) if cutoff > beam else 3.0e38)
+        # a texture plugin is projected (a constant colour is not: Mitsuba's spot uses the
+        # texture only when it is spatially varying)
+        tex = p.get("texture")
+        if getattr(tex, "category", None) == "texture" and textures is not None:
+            if cutoff >= np.pi / 2:
+                raise CompileError(f"{what}: a projected 'texture' needs a 'cutoff_angle' below "
+                                   "90 degrees", em.loc)
+            row[19] = textures.ref(tex, f"{what}: 'texture'", "emitted").index + 1
+            row[20] = np.tan(cutoff)
     elif em.type == "directional":
         _put_color(row, p["irradiance"], f"{what}: 'irradiance'", em.loc, model)
         row[3:6] = p["direction"]

@@ -45,6 +45,8 @@ AOV_TYPES: dict[str, tuple[str, ...]] = {
 }
 _SUFFIXES = {2: ("U", "V"), 3: ("X", "Y", "Z")}
 POLARIZED_ONLY = ("stokes",)  # Mitsuba refuses these in unpolarized variants
+# the integrators whose colour AOVs need the colour before the kernel's spectral weighting
+MONO_RGB_ONLY = ("moment",)
 
 
 @dataclass(frozen=True)
@@ -80,6 +82,11 @@ class IntegratorPlan:
     def check_variant(self, model: ColorModel) -> None:
         """A ``stokes`` integrator needs a polarized variant: an error at its XML otherwise."""
         node = self.wrapper if self.wrapper is not None else self.radiance
+        if node is not None and node.type in MONO_RGB_ONLY and (model.spectral or
+                                                                model.polarized):
+            raise CompileError(f"{node.type}: rdsl computes this integrator's XYZ moments in "
+                               f"the `mono` and `rgb` variants only, not `{model.name}`",
+                               node.loc)
         if node is not None and node.type in POLARIZED_ONLY and not model.polarized:
             raise CompileError(
                 f"{node.type}: the Stokes integrator needs a polarized variant (`mono_polarized` "
@@ -119,6 +126,10 @@ def _channels(integ: Any, struct: StructType) -> list[AovChannel]:
     """Every field as channels, or the ones Mitsuba's ``aovs`` property picks and names
     (parsed by the loader into ``aov_list``: (name, type) pairs)."""
     fields = dict(struct.fields)
+    if integ.type == "moment" and integ.decl is None:  # Mitsuba's names (moment.cpp)
+        name = (integ.params.get("nested_names") or ["_arg_0"])[0]
+        return [AovChannel(f, t, tuple(f"{pre}{name}.{c}" for c in "XYZ"))
+                for (f, t), pre in zip(struct.fields, ("", "m2_"), strict=True)]
     picked = integ.params.get("aov_list")
     if picked is None:
         return [AovChannel(f, t, _names(f, t)) for f, t in struct.fields]

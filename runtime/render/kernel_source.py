@@ -27,9 +27,9 @@ from ...compiler.diagnostics import CompileError
 from ...compiler.ir import SpectrumType, VecType
 from ...core.color import RGB, ColorModel
 from ..plugins import PluginDecl, kernel_imports, stdlib_plugin
-from .camera import camera_uniforms
 from .film import film_reach, film_uniforms
 from .integrators import IntegratorPlan, integrator_plan
+from .sensors import sensor_struct
 
 if TYPE_CHECKING:
     from ...core.scene_spec import Instance
@@ -42,14 +42,16 @@ TEMPLATE = Path(__file__).resolve().parents[2] / "stdlib" / "render" / "kernel.r
 # same names
 SCENE_BUFFERS = ("P", "N", "UV", "F", "G", "LC", "LT", "T", "EK", "E", "ENV", "BV", "BI")
 # the scene's sampler -> the `kind` of stdlib/render/integrator.rdsl's Sampler
-SAMPLER_KINDS = {"independent": 0, "stratified": 1, "multijitter": 3}
+SAMPLER_KINDS = {"independent": 0, "stratified": 1, "multijitter": 3, "orthogonal": 4,
+                 "ldsampler": 6}
 
 
 def sampler_kind(sampler: Any) -> int:
-    """The Sampler `kind` of the scene's sampler (a stratified one without jitter: 2)."""
+    """The Sampler `kind` of the scene's sampler (a stratified one without jitter: 2, an
+    orthogonal one: 5)."""
     kind = SAMPLER_KINDS[sampler.type]
     if sampler.params.get("jitter") is False:
-        return 2  # stratum centres (multijitter's too)
+        return 5 if kind == 4 else 2  # stratum centres (multijitter's too)
     return kind
 
 
@@ -114,9 +116,10 @@ def _imports(spectral: bool, plugins: list[str]) -> list[str]:
     return [f"import {m};" for m in modules]
 
 
-def _radiance_call(plan: IntegratorPlan, bufs: SceneBuffers) -> str:
+def _radiance_call(plan: IntegratorPlan, bufs: SceneBuffers, weight: str | None = None) -> str:
     """The kernel's lines computing `L` (and, with AOVs, the struct `sample_aovs`): the
-    scene handle, the sampler, then the integrators (the nested one first)."""
+    scene handle, the sampler, then the integrators (the nested one first); ``weight``:
+    the sensor's factor on the radiance (an irradiance meter's pi)."""
     buffers = ", ".join(f"{b}: {b}" for b in SCENE_BUFFERS)
     lines = [f"    let scene = Scene {{ {buffers},",
              f"                         nemitter: {bufs.nlight}, env: {bufs.lights.env}, "
@@ -134,6 +137,9 @@ def _radiance_call(plan: IntegratorPlan, bufs: SceneBuffers) -> str:
     else:
         out = "(L, sample_aovs)" if source is wrapper else "L"
         lines.append(f"    let {out} = {wrapper.type}.sample(scene, ray, sampler, L0);")
+    if weight is not None:
+        last = lines[-1].replace("(L,", "(Lu,").replace("let L =", "let Lu =")
+        lines[-1:] = [last, f"    let L = Lu * {weight};"]
     return "\n".join(lines)
 
 
@@ -193,6 +199,8 @@ def kernel_source(desc: Any, bufs: SceneBuffers, bsdfs: list[Instance],
     plan = integrator_plan(desc.integrator)
     plan.check_variant(model)
     plugins, _ = scene_plugins(desc, bsdfs, emitters, bufs.textures)
+    sensor, sensor_fields, sensor_module, sensor_weight = sensor_struct(desc.sensor)
+    plugins += [sensor_module] if sensor_module else []
     aov_fields = _aov_fields(plan, channels, spectral)
     value_type = "Vec3" if spectral else "Unpolarized" if mono_pol else "Spectrum"
     value = ("to_srgb(L * wavelength_weight)" if spectral else "unpolarized(L)"
@@ -211,9 +219,9 @@ def kernel_source(desc: Any, bufs: SceneBuffers, bsdfs: list[Instance],
         "value": value,
         "aov_fields": "".join(f"aov{k}: {t}, " for k, (t, _) in enumerate(aov_fields)),
         "aov_values": "".join(f"aov{k}: {e} * k, " for k, (_, e) in enumerate(aov_fields)),
-        "camera": literal(camera_uniforms(desc.sensor), "Camera"),
+        "camera": literal(sensor_fields, sensor),
         "seed_rng": "\n".join(seed_rng),
-        "radiance": _radiance_call(plan, bufs),
+        "radiance": _radiance_call(plan, bufs, sensor_weight),
         "sampler_kind": str(sampler_kind(desc.sensor.sampler)),
         **_film_holes(film),
     })

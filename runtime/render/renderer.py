@@ -32,6 +32,7 @@ from ...core.scene_spec import Instance, SceneSpec
 from ..tables import fill_tables
 from ..scene import load_scene_description
 from ..scene.reads import recording
+from ..scene.samplers import sample_count
 from .bvh import scene_bvh
 from .bsdfs import (
     bsdf_instance,
@@ -179,7 +180,8 @@ def flatten(desc: Any, triangulate: bool = False, model: ColorModel = RGB
 
     bufs = SceneBuffers(cat(P, np.float32), cat(N, np.float32), cat(UV, np.float32),
                         cat(F, np.int32), cat(G, np.int32),
-                        emitter_tables(desc, lights, len(emitters), analytic_lights, model),
+                        emitter_tables(desc, lights, len(emitters), analytic_lights, model,
+                                      textures),
                         meshes)
     bufs.T, bufs.textures = textures.buffer(model), textures.instances
     return bufs, bsdfs, emitters
@@ -459,7 +461,7 @@ class Scene:
         """The image at ``spp`` samples per pixel.  ``cancel`` is asked after each batch
         of samples (none is running then): once it answers True the render stops with
         :class:`RenderCancelled` (rdsl render --watch drops a render an edit made stale)."""
-        spp = int(spp or self.spp)
+        spp = sample_count(self.desc.sensor.sampler, int(spp or self.spp))
         seed = self.seed if seed is None else int(seed)
         mod = self.compile(quick=self.quick_fits(spp))
         if mod.traces_rays:  # a path tracer with max_depth 0 traces none: its image is black

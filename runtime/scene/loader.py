@@ -29,11 +29,12 @@ from ..plugins import PluginDecl, PluginRegistry, scene_spec, stdlib_names
 from . import meshes
 from . import transform as xf
 from .analytic import Analytic
-from .camera import fov_x
+from .cylinder import cylinder_frame, cylinder_mesh
 from .errors import scene_error
 from .meshes import Mesh, MeshError
 from .principled import resolve_principled
 from .reads import memoized
+from .samplers import attach_samplers, finish_sampler
 from .schema import (
     AOV_TYPES,
     BITMAP_FORMATS,
@@ -45,6 +46,7 @@ from .schema import (
     PluginSpec,
     plugin_types,
 )
+from .sensors import METERS, attach_meter, finish_sensor, top_level_sensor
 from .spectra import Color, as_reflectance, conductor_ior, lookup_ior
 from .xml import Child, ObjectNode, Prop, SceneTree, read_scene
 
@@ -76,6 +78,7 @@ class Sensor(Plugin):
 
     film: Plugin | None = None
     sampler: Plugin | None = None
+    shape: Plugin | None = None  # the shape an irradiancemeter is nested in
 
 
 @dataclass
@@ -87,6 +90,7 @@ class Shape(Plugin):
     analytic: Analytic | None = None
     bsdf: Plugin | None = None
     emitter: Plugin | None = None
+    sensor: Sensor | None = None  # an irradiancemeter nested in it
 
 
 @dataclass
@@ -132,9 +136,12 @@ class _Builder:
     # -- the scene ---------------------------------------------------------------------
     def build(self) -> SceneDescription:
         root = self.tree.root
-        integrators, sensors, shapes, emitters = [], [], [], []
+        integrators, sensors, shapes, emitters, samplers = [], [], [], [], []
         for ch in root.children:
             cat = ch.node.category
+            if cat == "sampler":  # as Mitsuba's docs scenes: for sensors without their own
+                samplers.append(self.instantiate(ch.node))
+                continue
             if cat not in SCENE_CHILDREN:
                 where = "<film>" if cat == "rfilter" else "<sensor>"
                 raise scene_error(f"<{cat}> cannot appear directly inside <scene>; nest it "
@@ -143,9 +150,10 @@ class _Builder:
             if cat == "integrator":
                 integrators.append(obj)
             elif cat == "sensor":
-                sensors.append(obj)
+                sensors.append(top_level_sensor(obj, ch.loc))
             elif cat == "shape":
                 shapes.append(obj)
+                sensors += [obj.sensor] if obj.sensor is not None else []
                 if obj.emitter is not None:
                     emitters.append(obj.emitter)
             elif cat == "emitter":
@@ -159,6 +167,7 @@ class _Builder:
         integrator = integrators[0] if integrators else self.default("integrator", "path")
         if not sensors:
             sensors.append(self.default_sensor(shapes))
+        attach_samplers(sensors, samplers, lambda: self.default("sampler", "independent"))
         return SceneDescription(self.tree.path, integrator, sensors, shapes, emitters,
                                 self.ids, dict(self.tree.params), self.plugins)
 
@@ -345,6 +354,8 @@ class _Builder:
             mesh = meshes.sphere()
         elif obj.type in ("rectangle", "cube", "disk"):
             mesh = getattr(meshes, obj.type)()
+        elif obj.type == "cylinder":
+            m, mesh = m @ cylinder_frame(p, lambda k: _loc(node, k)), cylinder_mesh()
         else:
             path = self.file(node, "filename", "mesh")
             try:
@@ -383,6 +394,8 @@ class _Builder:
                 raise scene_error(f"only an 'area' emitter can be attached to a shape, not "
                                   f"'{em.type}'", ch.loc)
             obj.emitter = em
+        if objects.get("sensor"):
+            attach_meter(obj, *objects["sensor"][0])
 
     def finish_bsdf(self, obj: Plugin, node: ObjectNode, objects: dict) -> None:
         p = obj.params
@@ -473,6 +486,8 @@ class _Builder:
         obj.children = [i for i, _ in objects.get("integrator", [])]
         if obj.decl is not None:  # a user's plugin (or one given as a file): its own params
             return
+        p["nested_names"] = [ch.name or f"_arg_{k}"
+                             for k, (_, ch) in enumerate(objects.get("integrator", []))]
         if obj.type == "path":
             if p["max_depth"] < -1:
                 raise scene_error("path: 'max_depth' must be -1 (infinite) or >= 0",
@@ -504,24 +519,11 @@ class _Builder:
             p["aov_list"] = aovs
 
     def finish_sensor(self, obj: Sensor, node: ObjectNode, objects: dict) -> None:
-        p = obj.params
-        obj.film = objects["film"][0][0] if objects["film"] else self.default("film", "hdrfilm")
-        obj.sampler = (objects["sampler"][0][0] if objects["sampler"]
-                       else self.default("sampler", "independent"))
-        m = p["to_world"] if p["to_world"] is not None else xf.identity()
-        if xf.has_scale(m):
-            raise scene_error(f"{self.what(node)}: scale factors in the camera's 'to_world' are "
-                              "not allowed", _loc(node, "to_world"))
-        p["to_world"] = m
-        if p["near_clip"] <= 0:
-            raise scene_error("'near_clip' must be greater than zero", _loc(node, "near_clip"))
-        if p["near_clip"] >= p["far_clip"]:
-            raise scene_error("'near_clip' must be smaller than 'far_clip'",
-                              _loc(node, "near_clip"))
-        if p["focus_distance"] is None:
-            p["focus_distance"] = p["far_clip"]
-        aspect = obj.film["width"] / obj.film["height"]
-        p["fov_x"] = fov_x(p, aspect, lambda k: _loc(node, k))
+        one = {"width": 1, "height": 1} if obj.type in METERS else {}  # a one-pixel film
+        obj.film = objects["film"][0][0] if objects["film"] else self.default("film", "hdrfilm",
+                                                                                **one)
+        obj.sampler = objects["sampler"][0][0] if objects["sampler"] else None
+        finish_sensor(obj, lambda k: _loc(node, k))
 
     def finish_film(self, obj: Plugin, node: ObjectNode, objects: dict) -> None:
         p = obj.params
@@ -547,9 +549,7 @@ class _Builder:
                 raise scene_error(f"rfilter '{obj.type}': '{k}' must be positive", _loc(node, k))
 
     def finish_sampler(self, obj: Plugin, node: ObjectNode, objects: dict) -> None:
-        if obj.params["sample_count"] <= 0:
-            raise scene_error("sampler: 'sample_count' must be positive",
-                              _loc(node, "sample_count"))
+        finish_sampler(obj, lambda k: _loc(node, k))
 
 
 def _declared(name: str, p: Param) -> str:

@@ -95,7 +95,7 @@ def P(kind: str, default: Any = None, choices: tuple[str, ...] | None = None) ->
 _DIST = P("string", "beckmann", ("beckmann", "ggx"))
 _SHAPE = {"to_world": P("transform"), "flip_normals": P("boolean", False)}
 _MESH = {**_SHAPE, "face_normals": P("boolean", False)}
-_SHAPE_CHILDREN = {"bsdf": (0, 1), "emitter": (0, 1)}
+_SHAPE_CHILDREN = {"bsdf": (0, 1), "emitter": (0, 1), "sensor": (0, 1)}
 _ROUGH = {"distribution": _DIST, "alpha": P("ftex", 0.1), "alpha_u": P("ftex"),
           "alpha_v": P("ftex"), "sample_visible": P("boolean", True)}
 _CONDUCTOR = {"material": P("string", "none"), "eta": P("color"), "k": P("color"),
@@ -131,6 +131,8 @@ _SPECS = [
                _SHAPE_CHILDREN),
     PluginSpec("shape", "sphere", {**_SHAPE, "center": P("point"), "radius": P("float", 1.0),
                                    "triangulate": P("boolean", False)}, _SHAPE_CHILDREN),
+    PluginSpec("shape", "cylinder", {**_SHAPE, "p0": P("point"), "p1": P("point"),
+                                     "radius": P("float", 1.0)}, _SHAPE_CHILDREN),
     PluginSpec("shape", "obj", {**_MESH, "filename": P("string", REQUIRED),
                                 "flip_tex_coords": P("boolean", True)}, _SHAPE_CHILDREN),
     PluginSpec("shape", "ply", {**_MESH, "filename": P("string", REQUIRED),
@@ -207,6 +209,7 @@ _SPECS = [
                                         "hide_emitters": P("boolean", False)}),
     PluginSpec("integrator", "aov", {"aovs": P("string", REQUIRED)}, {"integrator": (0, 8)}),
     PluginSpec("integrator", "stokes", {}, {"integrator": (1, 1)}),
+    PluginSpec("integrator", "moment", {}, {"integrator": (1, 8)}),
     # sensors, film, filters, samplers
     PluginSpec("sensor", "perspective", {**_CAMERA,
                                          "principal_point_offset_x": P("float", 0.0),
@@ -214,6 +217,14 @@ _SPECS = [
                _SENSOR_CHILDREN),
     PluginSpec("sensor", "thinlens", {**_CAMERA, "aperture_radius": P("float", REQUIRED)},
                _SENSOR_CHILDREN),
+    PluginSpec("sensor", "orthographic", {"to_world": P("transform"),
+                                          "near_clip": P("float", 1e-2),
+                                          "far_clip": P("float", 1e4),
+                                          "shutter_open": P("float", 0.0),
+                                          "shutter_close": P("float", 0.0)}, _SENSOR_CHILDREN),
+    PluginSpec("sensor", "radiancemeter", {"to_world": P("transform"), "origin": P("point"),
+                                           "direction": P("vector")}, _SENSOR_CHILDREN),
+    PluginSpec("sensor", "irradiancemeter", {}, _SENSOR_CHILDREN),
     PluginSpec("film", "hdrfilm", {
         "width": P("integer", 768), "height": P("integer", 576),
         "crop_offset_x": P("integer", 0), "crop_offset_y": P("integer", 0),
@@ -234,6 +245,11 @@ _SPECS = [
     PluginSpec("sampler", "multijitter", {"sample_count": P("integer", 4),
                                           "seed": P("integer", 0),
                                           "jitter": P("boolean", True)}),
+    PluginSpec("sampler", "orthogonal", {"sample_count": P("integer", 4),
+                                         "seed": P("integer", 0), "strength": P("integer", 2),
+                                         "jitter": P("boolean", True)}),
+    PluginSpec("sampler", "ldsampler", {"sample_count": P("integer", 4),
+                                        "seed": P("integer", 0)}),
 ]
 
 SCHEMA: dict[tuple[str, str], PluginSpec] = {(s.category, s.type): s for s in _SPECS}
