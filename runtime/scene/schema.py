@@ -120,6 +120,11 @@ _CAMERA = {
     "focus_distance": P("float"), "shutter_open": P("float", 0.0),
     "shutter_close": P("float", 0.0),
 }
+# the parameter that a nested texture of any name sets (Mitsuba's bumpmap takes its one
+# texture whatever its name)
+ANY_TEXTURE = "texture"
+_PERTURBED = {"flip_invalid_normals": P("boolean", True),
+              "use_shadowing_function": P("boolean", True)}
 _SENSOR_CHILDREN = {"film": (0, 1), "sampler": (0, 1)}
 
 _SPECS = [
@@ -174,6 +179,11 @@ _SPECS = [
     PluginSpec("bsdf", "twosided", {}, {"bsdf": (1, 2)}),
     PluginSpec("bsdf", "mask", {"opacity": P("ftex", 0.5)}, {"bsdf": (1, 1)}),
     PluginSpec("bsdf", "blendbsdf", {"weight": P("ftex", REQUIRED)}, {"bsdf": (2, 2)}),
+    # shading-frame perturbations of a nested BSDF (Mitsuba 3.9's PerturbedBSDF)
+    PluginSpec("bsdf", "normalmap", {"normalmap": P("color", REQUIRED), **_PERTURBED},
+               {"bsdf": (1, 1)}),
+    PluginSpec("bsdf", "bumpmap", {ANY_TEXTURE: P("ftex", REQUIRED), "scale": P("float", 1.0),
+                                   **_PERTURBED}, {"bsdf": (1, 1)}),
     # textures
     PluginSpec("texture", "bitmap", {
         **_TEX, "filename": P("string", REQUIRED),
