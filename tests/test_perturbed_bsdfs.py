@@ -30,12 +30,13 @@ def _images(folder: Path) -> None:
     Image.fromarray((h * 255).round().astype(np.uint8)).save(folder / "bump.png")
 
 
-def _scene(folder: Path, bsdf: str) -> Path:
+def _scene(folder: Path, bsdf: str, flip: bool = False) -> Path:
     _images(folder)
     path = folder / "perturbed.xml"
     path.write_text(scene_header("0, -2.5, 3", "0, 0, 0", "0, 0, 1", fov=45, res=RES,
                                  max_depth=4) + f"""  <shape type="rectangle">
-    <transform name="to_world"><scale value="1.5"/></transform>
+    <transform name="to_world"><scale value="1.5"/>{'<rotate x="1" angle="180"/>' * flip}
+    </transform>
     {bsdf}
   </shape>
   <emitter type="point"><point name="position" x="1" y="-1" z="2"/>
@@ -68,6 +69,11 @@ CASES = {
                                                  nested=NESTED),
     "normalmap-of-twosided": NORMALMAP.format(
         opts="", nested=f'<bsdf type="twosided">{NESTED}</bsdf>'),
+    # seen from below (the plane turned over): light from below sees the map mirrored
+    "back-of-twosided-normalmap": '<bsdf type="twosided">' + NORMALMAP.format(
+        opts="", nested=NESTED) + "</bsdf>",
+    "back-of-twosided-bumpmap": '<bsdf type="twosided">' + BUMPMAP.format(
+        opts='<float name="scale" value="0.1"/>', nested=NESTED) + "</bsdf>",
 }
 
 
@@ -76,10 +82,12 @@ CASES = {
 def test_perturbed_frame_matches_mitsuba(tmp_path: Path, case: str, variant: str):
     if variant == "spectral" and case not in ("normalmap", "bumpmap"):
         pytest.skip("the options are variant-independent; rgb covers them")
-    img, ref = render_both(_scene(tmp_path, CASES[case]), variant, SPP)
+    back = case.startswith("back")
+    img, ref = render_both(_scene(tmp_path, CASES[case], back), variant, SPP)
     flat_dir = tmp_path / "flat"
     flat_dir.mkdir()
-    flat, flat_ref = render_both(_scene(flat_dir, NESTED), variant, SPP)
+    flat, flat_ref = render_both(_scene(flat_dir, f'<bsdf type="twosided">{NESTED}</bsdf>',
+                                        back), variant, SPP)
 
     def rmse(a: np.ndarray, b: np.ndarray) -> float:
         return float(np.sqrt(np.mean((a - b) ** 2)))
@@ -115,7 +123,8 @@ BAD = {
     "scale-rgb": (BUMPMAP.replace("{opts}", '<rgb name="scale" value="0.1, 0.2, 0.3"/>'),
                   '<rgb name="scale"',
                   "parameter 'scale' of bsdf 'bumpmap' expects a float, got <rgb>"),
-    "nested": ('<bsdf type="twosided">' + NORMALMAP + "</bsdf>", 'type="normalmap"',
+    "nested": ('<bsdf type="blendbsdf"><float name="weight" value="0.5"/>' + NORMALMAP + NESTED
+               + "</bsdf>", 'type="normalmap"',
                "a normalmap nested in a combinator (twosided, blendbsdf, mask) is not supported"),
     "two-bsdfs": (NORMALMAP.replace("{nested}", "{nested}{nested}"),
                   "<bsdf type=\"roughplastic\"",

@@ -65,7 +65,9 @@ NESTED = {
                 Instance("diffuse", {"reflectance": SpectrumValue((0.7, 0.5, 0.3))})),
 }
 NORMALS = [(0.6, 0.5, 0.9), (0.2, 0.7, 0.8), (0.5, 0.5, 1.0)]  # texel colours, n = 2c - 1
-FLAGS = [(True, True), (False, False), (True, False)]
+# (flip_invalid_normals, use_shadowing_function, in a twosided)
+FLAGS = [(True, True, False), (False, False, False), (True, False, False), (True, True, True),
+         (False, True, True)]
 
 
 @pytest.fixture(scope="module", params=sorted(NESTED))
@@ -85,7 +87,7 @@ def _sph(n: int, seed: int) -> np.ndarray:
 
 def _pn(colour, flags, n: int) -> np.ndarray:
     c = 2 * np.asarray(colour, f32) - 1
-    code = 4 + int(flags[0]) + 2 * int(flags[1])
+    code = 4 + int(flags[0]) + 2 * int(flags[1]) + 8 * int(flags[2])
     return np.tile(np.array([*c, code], f32), (n, 1))
 
 
@@ -95,11 +97,11 @@ def _bufs():
 
 def _mitsuba(mi, nested: dict, colour, flags):
     bitmap = mi.Bitmap(np.asarray(colour, np.float32).reshape(1, 1, 3))
-    return mi.load_dict({"type": "normalmap", "bsdf": nested,
-                         "normalmap": {"type": "bitmap", "bitmap": bitmap, "raw": True,
-                                       "filter_type": "nearest"},
-                         "flip_invalid_normals": flags[0],
-                         "use_shadowing_function": flags[1]})
+    bsdf = {"type": "normalmap", "bsdf": nested,
+            "normalmap": {"type": "bitmap", "bitmap": bitmap, "raw": True,
+                          "filter_type": "nearest"},
+            "flip_invalid_normals": flags[0], "use_shadowing_function": flags[1]}
+    return mi.load_dict({"type": "twosided", "bsdf": bsdf} if flags[2] else bsdf)
 
 
 @pytest.mark.parametrize("colour", NORMALS)
@@ -108,7 +110,7 @@ def test_eval_and_pdf_match_mitsuba(kernels, colour, flags):
     name, mod = kernels
     n = 64
     wis = _sph(n, 1)
-    wis[:, 2] = np.abs(wis[:, 2]) * np.where(np.arange(n) % 8 == 0, -1, 1)  # some from below
+    wis[:, 2] = np.abs(wis[:, 2]) * np.where(np.arange(n) % 4 == 0, -1, 1)  # some from below
     wos = _sph(n, 2)
     pn = _pn(colour, flags, n)
     ours = np.asarray(mod["p_eval"](wis, wos, pn, *_bufs()))
@@ -133,15 +135,18 @@ def test_eval_and_pdf_match_mitsuba(kernels, colour, flags):
     np.testing.assert_allclose(ours_pdf, np.array(theirs_pdf), rtol=2e-3, atol=2e-5)
 
 
-@pytest.mark.parametrize("theta", [0.3, 1.0, 1.45])
-def test_sampling_matches_pdf(kernels, theta):
+@pytest.mark.parametrize("flags", [FLAGS[0], FLAGS[3]])
+@pytest.mark.parametrize("theta", [0.3, 1.0, 1.45, np.pi - 1.0])
+def test_sampling_matches_pdf(kernels, theta, flags):
     """chi-square of sample() against pdf(), and weight == eval / pdf, in the unperturbed
     frame (the directions a path integrator sees)."""
     name, mod = kernels
     n = 200_000
     wi = np.array([np.sin(theta) * np.cos(0.4), np.sin(theta) * np.sin(0.4), np.cos(theta)], f32)
     g = np.random.default_rng(3)
-    pn = _pn(NORMALS[0], FLAGS[0], n)
+    if theta > np.pi / 2 and not flags[2]:
+        pytest.skip("a one-sided BSDF reflects nothing from below")
+    pn = _pn(NORMALS[0], flags, n)
     bs = mod["p_sample"](np.tile(wi, (n, 1)), g.random(n, dtype=f32), g.random((n, 2), dtype=f32),
                          pn, *_bufs())
     wo, pdf = np.asarray(bs["wo"]), np.asarray(bs["pdf"])
@@ -149,7 +154,7 @@ def test_sampling_matches_pdf(kernels, theta):
 
     def pdf_of(d: np.ndarray) -> np.ndarray:
         m = len(d)
-        return np.asarray(mod["p_pdf"](np.tile(wi, (m, 1)), d, _pn(NORMALS[0], FLAGS[0], m),
+        return np.asarray(mod["p_pdf"](np.tile(wi, (m, 1)), d, _pn(NORMALS[0], flags, m),
                                        *_bufs()))
 
     assert chi2_directions(wo, valid, pdf_of, n) > 1e-3

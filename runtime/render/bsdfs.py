@@ -44,7 +44,8 @@ from .colors import spectrum_value
 from .declared import declared_instance
 
 COMBINATORS = ("twosided", "blendbsdf", "mask")  # Mitsuba's, all rdsl's `mixture`
-PERTURBED = ("normalmap", "bumpmap")  # Mitsuba's, rdsl's `perturbed` (outermost only)
+# Mitsuba's, rdsl's `perturbed`: outermost, or alone in a twosided
+PERTURBED = ("normalmap", "bumpmap")
 LEAF_PARAMS = ("a", "b", "c", "d")  # the mixture's parameters that hold leaf ids
 MAX_TERMS = len(LEAF_PARAMS)  # nested BSDFs one combinator tree may hold
 TEXTURED_WEIGHTS = 2  # textured blend weights / mask opacities one combinator tree may hold
@@ -176,11 +177,14 @@ def leaf_instance(plugin: Any, textures: Any = None) -> Instance:
     return Instance(plugin.type, params, plugin.id or plugin.type)
 
 
-def perturbed_instance(plugin: Any, textures: Any) -> Instance:
-    """A ``normalmap`` or ``bumpmap``: the internal plugin ``perturbed``
-    (stdlib/bsdf/perturbed.rdsl), the nested BSDF's mixture parameters and leaves plus the
-    texture that perturbs the shading normal."""
+def perturbed_instance(plugin: Any, textures: Any, twosided: bool = False) -> Instance:
+    """A ``normalmap`` or ``bumpmap`` (in a ``twosided``: the frame is mirrored for light from
+    below): the internal plugin ``perturbed`` (stdlib/bsdf/perturbed.rdsl), the nested BSDF's
+    mixture parameters and leaves plus the texture that perturbs the shading normal."""
     nested = plugin.children[0]
+    if twosided and nested.type in TRANSMISSIVE:
+        raise CompileError(f"{_where(nested)}: only BSDFs without transmission can be nested "
+                           f"in twosided, not `{nested.type}` (as Mitsuba)", nested.loc)
     if nested.type in COMBINATORS:
         inner = bsdf_instance(nested, textures)
         params, leaves = dict(inner.params), inner.children
@@ -200,7 +204,7 @@ def perturbed_instance(plugin: Any, textures: Any) -> Instance:
     ref = textures.ref(tex, f"{plugin.type}.{name}", "scalar")
     params.update(bump=bump, tex=ref.index, scale=float(plugin.params.get("scale", 1.0)),
                   flags=int(bool(plugin.params["flip_invalid_normals"]))
-                  | 2 * int(bool(plugin.params["use_shadowing_function"])))
+                  | 2 * int(bool(plugin.params["use_shadowing_function"])) | 8 * int(twosided))
     return Instance("perturbed", params, plugin.id or plugin.type, leaves)
 
 
@@ -209,6 +213,9 @@ def bsdf_instance(plugin: Any, textures: Any = None) -> Instance:
     (``split_leaves`` numbers them)."""
     if plugin.type in PERTURBED:
         return perturbed_instance(plugin, textures)
+    if (plugin.type == "twosided" and len(plugin.children) == 1
+            and plugin.children[0].type in PERTURBED):
+        return perturbed_instance(plugin.children[0], textures, twosided=True)
     if plugin.type not in COMBINATORS:
         return leaf_instance(plugin, textures)
     tree = _Tree(textures)
@@ -302,7 +309,8 @@ class _Tree:
         if plugin.type in PERTURBED:
             raise CompileError(f"{_where(plugin)}: a {plugin.type} nested in a combinator "
                                "(twosided, blendbsdf, mask) is not supported by the renderer "
-                               f"yet; make the {plugin.type} the outermost BSDF", plugin.loc)
+                               f"yet; make the {plugin.type} the outermost BSDF or the only "
+                               "one in a twosided", plugin.loc)
         if plugin.type not in COMBINATORS:
             if in_twosided and plugin.type in TRANSMISSIVE:
                 raise CompileError(f"{_where(plugin)}: only BSDFs without transmission can be "
