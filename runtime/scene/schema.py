@@ -155,6 +155,9 @@ _SPECS = [
     PluginSpec("bsdf", "roughplastic", {**_PLASTIC, "distribution": _DIST,
                                         "alpha": P("ftex", 0.1),
                                         "sample_visible": P("boolean", True)}),
+    # Mitsuba 3's polarized plastic: no `nonlinear`
+    PluginSpec("bsdf", "pplastic", {**{k: v for k, v in _PLASTIC.items() if k != "nonlinear"},
+                                    **_ROUGH}),
     # polarization: Mitsuba 3's angles are textures; rdsl takes constant degrees
     PluginSpec("bsdf", "polarizer", {"theta": P("fconst", 0.0),
                                      "transmittance": P("color", 1.0),
