@@ -148,3 +148,15 @@ def test_bad_input_is_an_error_at_its_line(tmp_path: Path, case: str):
     text = str(e.value)
     assert message in text, text
     assert f"{path}:{line}:" in text, (line, text)
+
+
+def test_generic_build_gives_the_same_image(tmp_path: Path):
+    """`--no-specialize`: the perturbed plugin's parameters (its texture's id included) read
+    from the parameter buffer at run time give the specialized kernel's image bit for bit."""
+    from rdsl.runtime.render.renderer import load_scene
+
+    path = _scene(tmp_path, '<bsdf type="twosided">' + BUMPMAP.format(
+        opts='<float name="scale" value="0.2"/>', nested=NESTED) + "</bsdf>")
+    a = load_scene(path).render(spp=4, seed=0)
+    b = load_scene(path, specialize=False).render(spp=4, seed=0)
+    np.testing.assert_array_equal(a, b)
