@@ -7,6 +7,9 @@ the sample's weight against eval / pdf."""
 
 from __future__ import annotations
 
+import re
+from pathlib import Path
+
 import numpy as np
 import pytest
 import rdsl
@@ -50,9 +53,21 @@ fn p_sample(wi: Vec3, u1: Float, u2: Vec2, pn: Vec4, F: [Float], I: [Int]) -> Bs
 }
 """
 
+
+
+def _scene_literal() -> str:
+    """A `Scene` whose buffers are the kernels' dummies F and I, whatever buffers the
+    stdlib's `Scene` declares."""
+    text = (Path(rdsl.__file__).resolve().parent / "stdlib" / "render"
+            / "integrator.rdsl").read_text()
+    body = re.search(r"struct Scene \{(.*?)\n\}", text, re.S).group(1)
+    buffers = re.findall(r"(\w+): \[(Float|Int)\]", body)
+    fields = ", ".join(f"{n}: {'F' if t == 'Float' else 'I'}" for n, t in buffers)
+    return f"Scene {{ {fields}, nemitter: 0, env: -1, up: Vec3(0.0, 0.0, 1.0) }}"
+
+
 # a struct holding buffers cannot be returned: the scene is built where it is used
-SOURCE = SOURCE.replace("SCENE", "Scene { P: F, N: F, UV: F, F: I, G: I, LC: F, LT: I, T: F, "
-                        "EK: I, E: F, ENV: F, nemitter: 0, env: -1, up: Vec3(0.0, 0.0, 1.0) }")
+SOURCE = SOURCE.replace("SCENE", _scene_literal())
 
 NESTED = {
     "roughconductor": ({"type": "roughconductor", "alpha": 0.3, "distribution": "ggx",
