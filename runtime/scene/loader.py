@@ -35,7 +35,6 @@ from .meshes import Mesh, MeshError
 from .principled import resolve_principled
 from .reads import memoized
 from .schema import (
-    ANY_TEXTURE,
     AOV_TYPES,
     BITMAP_FORMATS,
     KIND_ACCEPTS,
@@ -252,9 +251,7 @@ class _Builder:
             ref = (f" (a <ref> to {cat} '{ch.node.id}', declared at {ch.node.loc})"
                    if ch.is_ref else "")
             if cat == "texture":
-                name = ch.name
-                if name not in spec.params and ANY_TEXTURE in spec.params and spec.decl is None:
-                    name = ANY_TEXTURE  # Mitsuba's bumpmap: its one texture, of any name
+                name = spec.texture_param(ch.name)
                 if name is None:
                     raise scene_error(f"a <texture>{ref} nested in {self.what(node)} needs a "
                                       "name=\"...\" attribute naming the parameter it sets "

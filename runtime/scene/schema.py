@@ -87,6 +87,13 @@ class PluginSpec:
     children: dict[str, tuple[int, int]] = field(default_factory=dict)
     decl: Any = None  # a user plugin's runtime.plugins.PluginDecl (None: Mitsuba's schema)
 
+    def texture_param(self, name: str | None) -> str | None:
+        """The parameter a nested texture named ``name`` sets: its name, or for Mitsuba's
+        bumpmap (its one texture, of any name) ANY_TEXTURE."""
+        if name not in self.params and ANY_TEXTURE in self.params and self.decl is None:
+            return ANY_TEXTURE
+        return name
+
 
 def P(kind: str, default: Any = None, choices: tuple[str, ...] | None = None) -> Param:
     return Param(kind, default, choices)
