@@ -41,7 +41,7 @@ ENV = "RDSL_PLUGIN_PATH"
 # stdlib plugins the renderer instantiates itself, never a scene (a tree of combinators is one
 # `mixture`); written as `{name}_{method}_buffers` functions rather than a `bsdf` block, so
 # found by their file
-INTERNAL = {"mixture": "bsdf/mixture.rdsl"}
+INTERNAL = {"mixture": "bsdf/mixture.rdsl", "perturbed": "bsdf/perturbed.rdsl"}
 _DECL = re.compile(r"^[ \t]*(bsdf|texture|emitter|integrator)[ \t]+([A-Za-z_]\w*)[ \t]*\{", re.MULTILINE)
 # the language's keywords (dsl/parser.py): a file named like one cannot be imported
 _KEYWORDS = frozenset({"import", "struct", "fn", "param", "let", "var", "if", "else", "const",

@@ -198,10 +198,17 @@ def test_rough_sample_weight_matches_mitsuba(mi, plugin, mi_params, params, tol)
     """sample() of the rough BSDFs: the visible-normal samplers map random numbers
     differently, so the weight of each of our samples is compared with Mitsuba's
     eval / pdf at the same direction (what Mitsuba's own weight equals)."""
+    check_sample_weights(mi, plugin, mi_params, params, tol, EVAL_DIRS)
+
+
+def check_sample_weights(mi, plugin: str, mi_params: dict, params: dict, tol: float,
+                         dirs: np.ndarray) -> None:
+    """Each of 16 samples per direction of ``dirs``: its pdf is Mitsuba's pdf() of its
+    direction, its weight Mitsuba's eval / pdf there."""
     bsdf = mi.load_dict({"type": plugin, **mi_params})
     ctx = mi.BSDFContext()
     gen = np.random.default_rng(7)
-    wi = np.repeat(EVAL_DIRS, 16, axis=0)
+    wi = np.repeat(dirs, 16, axis=0)
     n = len(wi)
     bs = _call(plugin, "sample", _surfaces(wi), gen.random(n).astype(f32),
                gen.random((n, 2)).astype(f32), **params)

@@ -39,11 +39,13 @@ from ...compiler.diagnostics import CompileError
 from ...core.color import ColorModel
 from ...core.scene_spec import Instance
 from ..plugins import INTERNAL, stdlib_names, stdlib_plugin
-from ..scene.schema import spec_for
+from ..scene.schema import ANY_TEXTURE, spec_for
 from .colors import spectrum_value
 from .declared import declared_instance
 
 COMBINATORS = ("twosided", "blendbsdf", "mask")  # Mitsuba's, all rdsl's `mixture`
+# Mitsuba's, rdsl's `perturbed`: outermost, or alone in a twosided
+PERTURBED = ("normalmap", "bumpmap")
 LEAF_PARAMS = ("a", "b", "c", "d")  # the mixture's parameters that hold leaf ids
 MAX_TERMS = len(LEAF_PARAMS)  # nested BSDFs one combinator tree may hold
 TEXTURED_WEIGHTS = 2  # textured blend weights / mask opacities one combinator tree may hold
@@ -143,7 +145,7 @@ def leaf_instance(plugin: Any, textures: Any = None) -> Instance:
     if getattr(plugin, "decl", None) is not None:
         return declared_instance(plugin, textures)
     if stdlib_plugin("bsdf", plugin.type) is None or plugin.type in INTERNAL:
-        supported = ", ".join(sorted([*stdlib_names("bsdf"), *COMBINATORS]))
+        supported = ", ".join(sorted([*stdlib_names("bsdf"), *COMBINATORS, *PERTURBED]))
         raise CompileError(f"bsdf `{plugin.type}` is not supported by the renderer yet "
                            f"(supported: {supported})", plugin.loc)
     ours = plugin_params(plugin.type)
@@ -175,9 +177,45 @@ def leaf_instance(plugin: Any, textures: Any = None) -> Instance:
     return Instance(plugin.type, params, plugin.id or plugin.type)
 
 
+def perturbed_instance(plugin: Any, textures: Any, twosided: bool = False) -> Instance:
+    """A ``normalmap`` or ``bumpmap`` (in a ``twosided``: the frame is mirrored for light from
+    below): the internal plugin ``perturbed`` (stdlib/bsdf/perturbed.rdsl), the nested BSDF's
+    mixture parameters and leaves plus the texture that perturbs the shading normal."""
+    nested = plugin.children[0]
+    if twosided and nested.type in TRANSMISSIVE:
+        raise CompileError(f"{_where(nested)}: only BSDFs without transmission can be nested "
+                           f"in twosided, not `{nested.type}` (as Mitsuba)", nested.loc)
+    if nested.type in COMBINATORS:
+        inner = bsdf_instance(nested, textures)
+        params, leaves = dict(inner.params), inner.children
+    else:
+        params, leaves = mixture_params([(0, 1.0, 1.0, False)]), [leaf_instance(nested, textures)]
+    bump = plugin.type == "bumpmap"
+    name = ANY_TEXTURE if bump else "normalmap"
+    tex = plugin.params.get(name)
+    if getattr(tex, "category", None) != "texture" or getattr(tex, "type", None) != "bitmap":
+        got = (f"a `{tex.type}` texture" if getattr(tex, "category", None) == "texture"
+               else "a constant")
+        raise CompileError(f"{_where(plugin)}: `{name}` must be a bitmap texture (the renderer "
+                           f"reads its {'gradient' if bump else 'RGB normals'}), got {got}",
+                           getattr(tex, "loc", None) or plugin.loc)
+    if textures is None:
+        raise CompileError(f"{_where(plugin)}: textures are not available here", plugin.loc)
+    ref = textures.ref(tex, f"{plugin.type}.{name}", "scalar")
+    params.update(bump=bump, tex=ref.index, scale=float(plugin.params.get("scale", 1.0)),
+                  flags=int(bool(plugin.params["flip_invalid_normals"]))
+                  | 2 * int(bool(plugin.params["use_shadowing_function"])) | 8 * int(twosided))
+    return Instance("perturbed", params, plugin.id or plugin.type, leaves)
+
+
 def bsdf_instance(plugin: Any, textures: Any = None) -> Instance:
     """The instance of a shape's BSDF; a combinator's nested BSDFs are its ``children``
     (``split_leaves`` numbers them)."""
+    if plugin.type in PERTURBED:
+        return perturbed_instance(plugin, textures)
+    if (plugin.type == "twosided" and len(plugin.children) == 1
+            and plugin.children[0].type in PERTURBED):
+        return perturbed_instance(plugin.children[0], textures, twosided=True)
     if plugin.type not in COMBINATORS:
         return leaf_instance(plugin, textures)
     tree = _Tree(textures)
@@ -268,6 +306,11 @@ class _Tree:
         ``below`` and textured ``factors``; ``mirror``: the path from below has passed a
         twosided, which turned the directions over (after that the subtree is seen from its
         front side only)."""
+        if plugin.type in PERTURBED:
+            raise CompileError(f"{_where(plugin)}: a {plugin.type} nested in a combinator "
+                               "(twosided, blendbsdf, mask) is not supported by the renderer "
+                               f"yet; make the {plugin.type} the outermost BSDF or the only "
+                               "one in a twosided", plugin.loc)
         if plugin.type not in COMBINATORS:
             if in_twosided and plugin.type in TRANSMISSIVE:
                 raise CompileError(f"{_where(plugin)}: only BSDFs without transmission can be "

@@ -260,15 +260,16 @@ class _Builder:
             ref = (f" (a <ref> to {cat} '{ch.node.id}', declared at {ch.node.loc})"
                    if ch.is_ref else "")
             if cat == "texture":
-                if ch.name is None:
+                name = spec.texture_param(ch.name)
+                if name is None:
                     raise scene_error(f"a <texture>{ref} nested in {self.what(node)} needs a "
                                       "name=\"...\" attribute naming the parameter it sets "
                                       f"(accepted: {accepted})", ch.loc)
-                if ch.name not in spec.params:
-                    raise scene_error(f"unknown parameter '{ch.name}' of {self.what(node)}{ref}"
+                if name not in spec.params:
+                    raise scene_error(f"unknown parameter '{name}' of {self.what(node)}{ref}"
                                       f"; accepted: {accepted}", ch.loc)
-                params[ch.name] = self.convert(node, ch.name, spec.params[ch.name], "texture",
-                                               ch.node, ch.loc)
+                params[name] = self.convert(node, name, spec.params[name], "texture",
+                                            ch.node, ch.loc)
                 continue
             if cat not in spec.children:
                 if ch.name in spec.params:

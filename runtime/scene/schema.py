@@ -87,6 +87,13 @@ class PluginSpec:
     children: dict[str, tuple[int, int]] = field(default_factory=dict)
     decl: Any = None  # a user plugin's runtime.plugins.PluginDecl (None: Mitsuba's schema)
 
+    def texture_param(self, name: str | None) -> str | None:
+        """The parameter a nested texture named ``name`` sets: its name, or for Mitsuba's
+        bumpmap (its one texture, of any name) ANY_TEXTURE."""
+        if name not in self.params and ANY_TEXTURE in self.params and self.decl is None:
+            return ANY_TEXTURE
+        return name
+
 
 def P(kind: str, default: Any = None, choices: tuple[str, ...] | None = None) -> Param:
     return Param(kind, default, choices)
@@ -120,6 +127,11 @@ _CAMERA = {
     "focus_distance": P("float"), "shutter_open": P("float", 0.0),
     "shutter_close": P("float", 0.0),
 }
+# the parameter that a nested texture of any name sets (Mitsuba's bumpmap takes its one
+# texture whatever its name)
+ANY_TEXTURE = "texture"
+_PERTURBED = {"flip_invalid_normals": P("boolean", True),
+              "use_shadowing_function": P("boolean", True)}
 _SENSOR_CHILDREN = {"film": (0, 1), "sampler": (0, 1)}
 
 _SPECS = [
@@ -152,6 +164,9 @@ _SPECS = [
     PluginSpec("bsdf", "roughplastic", {**_PLASTIC, "distribution": _DIST,
                                         "alpha": P("ftex", 0.1),
                                         "sample_visible": P("boolean", True)}),
+    # Mitsuba 3's polarized plastic: no `nonlinear`
+    PluginSpec("bsdf", "pplastic", {**{k: v for k, v in _PLASTIC.items() if k != "nonlinear"},
+                                    **_ROUGH}),
     # polarization: Mitsuba 3's angles are textures; rdsl takes constant degrees
     PluginSpec("bsdf", "polarizer", {"theta": P("fconst", 0.0),
                                      "transmittance": P("color", 1.0),
@@ -176,6 +191,11 @@ _SPECS = [
     PluginSpec("bsdf", "twosided", {}, {"bsdf": (1, 2)}),
     PluginSpec("bsdf", "mask", {"opacity": P("ftex", 0.5)}, {"bsdf": (1, 1)}),
     PluginSpec("bsdf", "blendbsdf", {"weight": P("ftex", REQUIRED)}, {"bsdf": (2, 2)}),
+    # shading-frame perturbations of a nested BSDF (Mitsuba 3.9's PerturbedBSDF)
+    PluginSpec("bsdf", "normalmap", {"normalmap": P("color", REQUIRED), **_PERTURBED},
+               {"bsdf": (1, 1)}),
+    PluginSpec("bsdf", "bumpmap", {ANY_TEXTURE: P("ftex", REQUIRED), "scale": P("float", 1.0),
+                                   **_PERTURBED}, {"bsdf": (1, 1)}),
     # textures
     PluginSpec("texture", "bitmap", {
         **_TEX, "filename": P("string", REQUIRED),
