@@ -71,6 +71,26 @@ def test_a_reference_of_the_right_size_is_used(tmp_path: Path) -> None:
     assert curve[4][1] < curve[1][1], r.stdout
 
 
+def test_seconds_doubles_spp_until_a_render_takes_that_long(tmp_path: Path) -> None:
+    r = rdsl(str(CBOX), *SMALL, "--seconds", "0.002", tmp=tmp_path)
+    assert r.returncode == 0, r.stderr
+    curve = next(iter(table(r.stdout).values()))
+    spp = sorted(curve)
+    assert spp == [2 ** k for k in range(len(spp))], r.stdout
+    assert all(curve[n][0] < 0.002 for n in spp[:-1]), r.stdout  # it went on while short
+    assert curve[spp[-1]][0] >= 0.002 or spp[-1] == 1 << 16, r.stdout
+
+
+def test_each_variant_has_its_own_curve_and_reference(tmp_path: Path) -> None:
+    r = rdsl(str(CBOX), *SMALL, "--spp", "1,16", "--variants", "rgb,spectral", tmp=tmp_path)
+    assert r.returncode == 0, r.stderr
+    rows = table(r.stdout)
+    assert sorted(k[2] for k in rows) == ["rgb", "spectral"], r.stdout
+    assert r.stdout.count("reference: rdsl") == 2, r.stdout
+    for curve in rows.values():
+        assert curve[16][1] < 0.6 * curve[1][1], r.stdout
+
+
 @pytest.mark.parametrize("args, needle", [
     (["nope.xml"], "nope.xml: no such scene file"),
     ([str(CBOX), *SMALL, "--ref", str(ROOT / "examples" / "cbox" / "cbox_ref_rgb.exr")],
@@ -80,6 +100,8 @@ def test_a_reference_of_the_right_size_is_used(tmp_path: Path) -> None:
     ([str(CBOX), *SMALL, "--variants", "rgb,hyperspectral"], "unknown variant `hyperspectral`"),
     ([str(CBOX), *SMALL, "--spp", "1,x"], "--spp: expected comma-separated integers"),
     ([str(CBOX), *SMALL, "-o", "plot.jpg"], "the plot is a PNG"),
+    ([str(CBOX), *SMALL, "--spp", "4", "--seconds", "1"], "give --spp or --seconds, not both"),
+    ([str(CBOX), *SMALL, "--spp", "0,4"], "--spp: expected positive integers"),
 ])
 def test_bad_input_is_one_clear_line(tmp_path: Path, args: list[str], needle: str) -> None:
     r = rdsl(*args, tmp=tmp_path)

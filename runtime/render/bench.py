@@ -89,7 +89,7 @@ def add_commands(sub: argparse._SubParsersAction) -> dict[str, Callable[[Any], i
                    help="also render Mitsuba 3 at the same spp, taking turns run by run")
     b.add_argument("--targets", default="host", help="comma-separated (default: host)")
     b.add_argument("--variants", default="rgb", help="comma-separated (default: rgb)")
-    b.add_argument("--spp", default="1,4,16,64", help="comma-separated (default: 1,4,16,64)")
+    b.add_argument("--spp", default=None, help="comma-separated (default: 1,4,16,64)")
     b.add_argument("--seconds", type=float, default=None, metavar="S",
                    help="instead of --spp: 1, 2, 4, ... spp until a render takes S seconds")
     b.add_argument("--repeat", type=int, default=1,
@@ -112,16 +112,18 @@ def _names(text: str, what: str) -> list[str]:
 def _spp_list(args: Any) -> list[int] | None:
     """The spp asked, or None for ``--seconds`` (1, 2, 4, ... until a render is that long)."""
     if args.seconds is not None:
+        if args.spp is not None:
+            raise CompileError("give --spp or --seconds, not both")
         if args.seconds <= 0:
             raise CompileError(f"--seconds: expected a positive number, got {args.seconds}")
         return None
+    text = args.spp or "1,4,16,64"
     try:
-        spp = [int(s) for s in _names(args.spp, "spp")]
+        spp = [int(s) for s in _names(text, "spp")]
     except ValueError:
-        raise CompileError(f"--spp: expected comma-separated integers, got `{args.spp}`") \
-            from None
+        raise CompileError(f"--spp: expected comma-separated integers, got `{text}`") from None
     if min(spp) < 1:
-        raise CompileError(f"--spp: expected positive integers, got `{args.spp}`")
+        raise CompileError(f"--spp: expected positive integers, got `{text}`")
     return sorted(set(spp))
 
 
