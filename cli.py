@@ -16,6 +16,7 @@ from typing import Any
 from .compiler import cli as compiler_cli
 from .compiler.diagnostics import CompileError
 from .compiler.driver import InternalError
+from .runtime.render import bench as bench_cli
 from .runtime.render import cli as render_cli
 from .runtime.testkit import cli as testkit_cli
 
@@ -26,7 +27,7 @@ def parser() -> tuple[argparse.ArgumentParser, dict[str, Callable[[Any], int]]]:
                                 "rendering.")
     sub = p.add_subparsers(dest="cmd", required=True)
     commands = {**compiler_cli.add_commands(sub), **render_cli.add_commands(sub),
-                **testkit_cli.add_commands(sub)}
+                **testkit_cli.add_commands(sub), **bench_cli.add_commands(sub)}
     return p, commands
 
 

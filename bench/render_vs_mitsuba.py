@@ -17,13 +17,12 @@ from __future__ import annotations
 
 import argparse
 import os
-import statistics
 import sys
 import time
-from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
+from rdsl.runtime.render.bench import interleaved_medians, rmse
 
 ROOT = Path(__file__).resolve().parents[1]
 DEFAULT_SCENE = ROOT / "examples" / "cbox" / "cbox.xml"
@@ -35,29 +34,6 @@ def reference_for(scene: Path) -> Path | None:
         if (scene.parent / name).is_file():
             return scene.parent / name
     return None
-
-
-def interleaved_medians(fns: dict[str, Callable[[int], np.ndarray]], repeat: int,
-                        runs: dict[str, list[float]] | None = None
-                        ) -> dict[str, tuple[float, float, np.ndarray]]:
-    """Median wall seconds, median CPU seconds (all the process's threads) and the last image
-    of each renderer in ``fns``, after a warm-up (compilation, caches, page faults).  The
-    renderers take turns, one run each per repeat, so a change in the machine's load (it is
-    shared) hits them alike; CPU seconds hardly change with the load at all.  ``runs``, if
-    given, receives each renderer's wall seconds run by run."""
-    imgs = {name: fn(0) for name, fn in fns.items()}
-    times: dict[str, list[float]] = {name: [] for name in fns}
-    cpus: dict[str, list[float]] = {name: [] for name in fns}
-    for k in range(repeat):
-        for name, fn in fns.items():
-            t, c = time.perf_counter(), time.process_time()
-            imgs[name] = fn(k + 1)
-            times[name].append(time.perf_counter() - t)
-            cpus[name].append(time.process_time() - c)
-    if runs is not None:
-        runs.update(times)
-    return {name: (statistics.median(times[name]), statistics.median(cpus[name]), imgs[name])
-            for name in fns}
 
 
 def rdsl_renderer(scene: Path, threads: int, target: str):
@@ -91,10 +67,6 @@ def mitsuba_renderer(scene: Path, threads: int):
     def render(spp: int, seed: int) -> np.ndarray:
         return np.array(mi.render(sc, spp=spp, seed=seed))  # forces evaluation
     return render
-
-
-def rmse(a: np.ndarray, b: np.ndarray) -> float:
-    return float(np.sqrt(np.mean((a[..., :3].astype(np.float64) - b[..., :3]) ** 2)))
 
 
 def main() -> None:

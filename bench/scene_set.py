@@ -41,7 +41,7 @@ sys.path.insert(0, str(ROOT / "bench"))
 sys.path.insert(0, str(ROOT / "bench" / "scenes"))
 os.environ.setdefault("DRJIT_LIBLLVM_PATH", "/usr/lib/x86_64-linux-gnu/libLLVM.so.19.1")
 
-from render_vs_mitsuba import interleaved_medians, rmse
+from rdsl.runtime.render.bench import interleaved_medians, mitsuba_variant, rmse
 
 SET = ROOT / "bench" / "scenes" / "set"
 CBOX = ROOT / "examples" / "cbox" / "cbox.xml"
@@ -55,18 +55,6 @@ def all_scenes() -> dict[str, Path]:
     out = {p.stem: p for p in sorted(SET.glob("*.xml"))}
     out["cbox"] = CBOX
     return out
-
-
-def mitsuba_variant() -> str:
-    import mitsuba as mi
-
-    for v in ("llvm_ad_rgb", "scalar_rgb"):
-        try:
-            mi.set_variant(v)
-            return v
-        except Exception:  # noqa: BLE001,S112 - libLLVM missing: the next variant
-            continue
-    raise RuntimeError("no Mitsuba 3 rgb variant")
 
 
 def scene_defaults(path: Path) -> dict[str, int]:
