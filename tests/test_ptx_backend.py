@@ -148,6 +148,7 @@ INTEGRATORS = {
              '<integrator type="path"/></integrator>'), "rgb"),
     "stokes": ('<integrator type="stokes"><integrator type="path"/></integrator>',
                "spectral_polarized"),
+    "moment": ('<integrator type="moment"><integrator type="path"/></integrator>', "rgb"),
 }
 
 
