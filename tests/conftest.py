@@ -1,0 +1,31 @@
+"""The test suite's kernel tier.
+
+Kernels compile at LLVM O0 (``RDSL_QUICK=1``, the quick tier of ``rdsl.jit``) in the tests
+of rendering and plugins: O0 and O3 give the same results bit for bit (no fast-math, no
+contraction; ``tests/test_quick_tier.py`` checks a render of each), and O0 compiles in about
+60% of the time, which is most of this suite's.  The tests of code generation itself build
+the full tier, as users get it: the backend's op semantics, the differential corpus, the
+kernel ABI and layouts, the bit-identical reference images and the tiers' own test.  Run
+``RDSL_QUICK=0 pytest tests`` to build everything at the full tier.
+"""
+
+from __future__ import annotations
+
+import os
+
+import pytest
+
+os.environ.setdefault("RDSL_QUICK", "1")
+
+FULL_TIER = {"test_llvm_backend", "test_differential", "test_c_abi", "test_kernel_layouts",
+             "test_bit_identical", "test_quick_tier"}
+
+
+@pytest.fixture(scope="module", autouse=True)
+def _kernel_tier(request: pytest.FixtureRequest):
+    if request.module.__name__.rsplit(".", 1)[-1] not in FULL_TIER:
+        yield
+        return
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setenv("RDSL_QUICK", "0")
+        yield
