@@ -79,3 +79,19 @@ def test_wrong_input_is_one_clear_message(capsys, tmp_path, monkeypatch, args, m
     rc = main(["stress", "--fast", *args])
     out, err = capsys.readouterr()
     assert rc != 0 and message in out + err and "Traceback" not in out + err, out + err
+
+
+@pytest.mark.parametrize("variant", ["rgb", "mono_polarized"])
+def test_conductor_with_index_zero_is_a_mirror(variant):
+    """What the sweep found: eta = k = 0 was NaN (0 / 0, a division by 0 in the polarized
+    Fresnel term). Its limit n -> 0 reflects everything: |r_s| = |r_p| = 1 at every angle."""
+    import numpy as np
+    from rdsl.runtime.testkit.common import surface, tile
+    from rdsl.runtime.testkit.harness import Harness
+
+    h = Harness("conductor", variant)
+    for c in (1.0, 0.5, 1e-3):
+        wi = np.array([np.sqrt(1 - c * c), 0, c], np.float32)
+        bs = h.sample(surface(tile(wi, 4)), np.full(4, 0.5, np.float32),
+                      np.full((4, 2), 0.5, np.float32), eta=0.0, k=0.0)
+        assert np.allclose(np.asarray(bs["weight"]), 1.0, atol=1e-5), (variant, c, bs["weight"])
