@@ -35,7 +35,9 @@ def add_commands(sub: argparse._SubParsersAction) -> dict[str, Callable[[Any], i
     t.add_argument("--plugin", default=None, help="which plugin, if the file declares several")
     t.add_argument("--samples", type=int, default=Options.samples,
                    help=f"samples per chi-square and energy case (default {Options.samples})")
-    return {"test-plugin": test_plugin_command}
+    from .stress import add_command as add_stress
+
+    return {"test-plugin": test_plugin_command, **add_stress(sub)}
 
 
 def _at(path: Path | str, line: int = 0, col: int = 0) -> Loc:
