@@ -302,8 +302,9 @@ class Scene:
         were (a source they import changed: the cache key tells whether it did).  ``quick``:
         the quick tier will do (:func:`rdsl.runtime.api.jit`), unless the full one is cached
         or loaded already; without it, quick kernels loaded before are replaced."""
-        from ...runtime.api import jit, jit_cached
+        from ...runtime.api import jit, jit_cached, quick_everywhere
 
+        quick = quick or quick_everywhere()  # RDSL_QUICK=1: the full tier is never built
         loaded_quick = getattr(self._module, "quick", False)  # a PTX module has no tiers
         if self._module is not None and not again and (quick or not loaded_quick):
             return self._module
