@@ -143,5 +143,5 @@ def test_a_transform_that_overflows_float32_is_an_error_at_its_line(tmp_path: Pa
     path.write_text('<scene version="3.0.0">\n<shape type="rectangle">\n'
                     f'  <transform name="to_world"><scale value="{scale}"/></transform>\n'
                     '</shape>\n</scene>\n')
-    with pytest.raises(CompileError, match=r"big\.xml:3:.*not finite 32-bit floats"):
+    with pytest.raises(CompileError, match=r"big\.xml:3:.*not finite"):
         load_scene(path)

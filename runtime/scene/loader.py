@@ -343,9 +343,9 @@ class _Builder:
     def finish_shape(self, obj: Shape, node: ObjectNode, objects: dict) -> None:
         p = obj.params
         m = p["to_world"] if p["to_world"] is not None else xf.identity()
-        if abs(np.linalg.det(m[:3, :3])) < 1e-30:
-            raise scene_error(f"{self.what(node)}: 'to_world' is singular", _loc(node,
-                                                                                  "to_world"))
+        if xf.singular(m):
+            raise scene_error(f"{self.what(node)}: 'to_world' is singular or not finite",
+                              _loc(node, "to_world"))
         if obj.type == "sphere":
             if p["radius"] <= 0:
                 raise scene_error("sphere: 'radius' must be positive", _loc(node, "radius"))

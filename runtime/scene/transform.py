@@ -83,6 +83,12 @@ def from_values(values: list[float]) -> np.ndarray:
     raise ValueError(f"expected 16 (or 9) values, got {len(values)}")
 
 
+def singular(m: np.ndarray) -> bool:
+    """Whether the linear part of ``m`` is singular, or ``m`` holds a NaN or an infinity
+    (told apart without numpy's warning on a NaN determinant)."""
+    return not np.all(np.isfinite(m)) or abs(np.linalg.det(m[:3, :3])) < 1e-30
+
+
 def apply_points(m: np.ndarray, p: np.ndarray) -> np.ndarray:
     """Transform points (N, 3) by an affine matrix (float64 result)."""
     p = np.asarray(p, dtype=np.float64)
