@@ -65,8 +65,7 @@ def _lerp(samples: np.ndarray, x: np.ndarray) -> np.ndarray:
     return (1 - w) * samples[i] + w * samples[i + 1]
 
 
-@pytest.mark.parametrize("dist", [0, 1])
-def test_transmittance_table_within_its_stated_error(dist):
+def _transmittance_errors(dist: int) -> tuple[dict, float]:
     """roughplastic's external_transmittance, sampled at its 64 points and interpolated,
     against the function itself at 8 points per interval (all of its domain): within the
     `error` it declares, and within the finer bounds its comment states."""
@@ -89,10 +88,23 @@ def test_transmittance_table_within_its_stated_error(dist):
             worst["mu >= 1/63"] = max(worst["mu >= 1/63"], float(err[8:].max()))
             if alpha >= 0.1:
                 worst["alpha >= 0.1"] = max(worst["alpha >= 0.1"], float(err.max()))
-    assert worst["all"] <= opts["error"], worst
+    return worst, opts["error"]
+
+
+@pytest.mark.parametrize("dist", [0, 1])
+def test_transmittance_table_within_its_stated_error(dist):
+    """(Run in a fresh process: in two of three full-suite runs an xdist worker died inside
+    this test's JIT compiles, after hundreds of other tests had loaded their kernels, PoCL
+    and lavapipe into it; alone it never did.  See the stop-19 note.)"""
+    import multiprocessing
+    from concurrent.futures import ProcessPoolExecutor
+
+    with ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("spawn")) as pool:
+        worst, error = pool.submit(_transmittance_errors, dist).result()
+    assert worst["all"] <= error, worst
     assert worst["mu >= 1/63"] <= 3.2e-3 and worst["alpha >= 0.1"] <= 6e-4, worst
     print(f"distribution {dist}: worst interpolation errors {worst} "
-          f"(declared {opts['error']:.0e})")
+          f"(declared {error:.0e})")
 
 
 # ---------------------------------------------------------------------- against Mitsuba 3
