@@ -83,12 +83,12 @@ def tabulate(module: Module, options: dict[str, Any], params: dict[str, Any]) ->
 
 
 class _Kernel:
-    """A JIT-compiled table function: ``(xs, params) -> values``."""
+    """A compiled table function: ``(xs, params) -> values``."""
 
-    def __init__(self, name: str, engine: Any, address: int, args: list[Any],
+    def __init__(self, name: str, lib: Any, address: int, args: list[Any],
                  params: list[Param], used: set[str]) -> None:
         self.name, self.used = name, used
-        self.engine = engine  # keeps the code alive
+        self.lib = lib  # keeps the code mapped
         self.args = args  # the CArgs after n
         self.params = params  # the uniform parameters, with their defaults
         argtypes: list[Any] = [ctypes.c_int64]
@@ -155,9 +155,11 @@ def _reachable(module: Module, fn: Function) -> list[str]:
 
 
 def _compile(sub: Module, fn: Function, has_x: bool) -> _Kernel:
-    """Wrap ``fn`` as the kernel ``tabulate(x, params...)``, compile it for the host, JIT."""
+    """Wrap ``fn`` as the kernel ``tabulate(x, params...)``, compile it for the host
+    and load it (compiler/backends/native_lib.py)."""
     from .backends.base import c_args, c_name
     from .backends.llvm import optimized_module
+    from .backends.native_lib import address_of, load_native
     from .build import Build
     from .driver import pipeline, run_passes
     from .passes.inline import Inline
@@ -177,16 +179,14 @@ def _compile(sub: Module, fn: Function, has_x: bool) -> _Kernel:
     build = Build.of("scalar", "rgb")
     run_passes(sub, pipeline(build), verify=False)
     mod, tm = optimized_module(sub, build.target, speed=1)
-    import llvmlite.binding as llvm
-
-    engine = llvm.create_mcjit_compiler(mod, tm)
-    engine.finalize_object()
-    address = engine.get_function_address("rdsl_" + c_name(wrapper.name))
+    t = build.target
+    lib = load_native(mod, tm, f"{t.triple} {t.cpu} {t.features}", f"table `{fn.name}`")
+    address = address_of(lib, "rdsl_" + c_name(wrapper.name))
     if not address:
-        raise CompileError(f"table `{fn.name}`: the JIT did not produce its kernel", fn.loc)
+        raise CompileError(f"table `{fn.name}`: the compiled library lacks its kernel", fn.loc)
     compiled = sub.functions[wrapper.name]
     uniforms = [p for p in wrapper.params if p.uniform]
-    return _Kernel(fn.name, engine, address, c_args(compiled), uniforms, used_names)
+    return _Kernel(fn.name, lib, address, c_args(compiled), uniforms, used_names)
 
 
 def _wrapper(sub: Module, fn: Function, has_x: bool) -> Function:

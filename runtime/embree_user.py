@@ -4,7 +4,7 @@ A :class:`UserShape` (from :func:`sphere` or :func:`disk`) holds the block of do
 callbacks read (its ``geometryUserPtr``, laid out by :data:`rdsl.core.embree_abi.USER_BLOCK`,
 world space) and registers itself with Embree through ctypes when an
 :class:`~rdsl.runtime.embree.EmbreeScene` is built.  The callbacks themselves (bounds,
-intersect, occluded; native, so no Python runs per ray) are generated and JIT-compiled by the
+intersect, occluded; native, so no Python runs per ray) are generated and compiled by the
 backend, ``compiler/backends/llvm_shapes.py``, which hands over their addresses.
 """
 

@@ -93,14 +93,7 @@ def _transmittance_errors(dist: int) -> tuple[dict, float]:
 
 @pytest.mark.parametrize("dist", [0, 1])
 def test_transmittance_table_within_its_stated_error(dist):
-    """(Run in a fresh process: in two of three full-suite runs an xdist worker died inside
-    this test's JIT compiles, after hundreds of other tests had loaded their kernels, PoCL
-    and lavapipe into it; alone it never did.  See the stop-19 note.)"""
-    import multiprocessing
-    from concurrent.futures import ProcessPoolExecutor
-
-    with ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("spawn")) as pool:
-        worst, error = pool.submit(_transmittance_errors, dist).result()
+    worst, error = _transmittance_errors(dist)
     assert worst["all"] <= error, worst
     assert worst["mu >= 1/63"] <= 3.2e-3 and worst["alpha >= 0.1"] <= 6e-4, worst
     print(f"distribution {dist}: worst interpolation errors {worst} "

@@ -2,7 +2,7 @@
 
 Embree calls a user geometry's intersect and occluded callbacks during traversal, from the
 compiled kernels' ``rtcIntersectN``/``rtcOccludedN``.  Those callbacks are generated here as
-LLVM IR (llvmlite) and JIT-compiled once per process (MCJIT); :func:`callback_addresses`
+LLVM IR (llvmlite), compiled once (a cached shared library: native_lib.py); :func:`callback_addresses`
 hands their addresses to the runtime (``runtime/embree_user.py``), which binds them to each
 geometry, so no Python runs per ray.  The bounds callback is native too (it only copies a
 box).
@@ -41,6 +41,7 @@ from typing import Any
 import llvmlite.ir as L
 
 from ...core.embree_abi import HIT_FIELDS, RAY_FIELDS, USER_BLOCK, USER_CALLBACKS, EmbreeError
+from .native_lib import address_of, load_native
 
 _engine: Any = None
 _addresses: dict[str, int] = {}
@@ -65,12 +66,12 @@ def callback_addresses() -> dict[str, int]:
                                               features=llvm.get_host_cpu_features().flatten(),
                                               opt=3, reloc="pic")
             _optimize(llvm, mod, tm)
-            engine = llvm.create_mcjit_compiler(mod, tm)
-            engine.finalize_object()
-            addrs = {n: engine.get_function_address(f"rdsl_user_{n}") for n in USER_CALLBACKS}
+            machine = f"{llvm.get_host_cpu_name()} {llvm.get_host_cpu_features().flatten()}"
+            lib = load_native(mod, tm, machine, "the Embree user-geometry callbacks")
+            addrs = {n: address_of(lib, f"rdsl_user_{n}") for n in USER_CALLBACKS}
             if not all(addrs.values()):
-                raise EmbreeError("the JIT did not produce the user-geometry callbacks")
-            _engine = engine  # keeps the code alive for the process
+                raise EmbreeError("the compiled user-geometry callbacks are incomplete")
+            _engine = lib  # keeps the code mapped for the process
             _addresses.update(addrs)
         return dict(_addresses)
 
