@@ -220,10 +220,24 @@ class SimdC(CLikePrinter):
         buf, idx, mask = ins.operands
         e = buf.type.elem.name  # type: ignore[attr-defined]
         r = self.declare(ins.result, None)
+        macro = self.gather_macro(e, idx, mask)
+        if macro:  # the hardware gather (c_entry.prelude), or its lane loop
+            self.line(f"{macro}({self.ctype(ins.type)}, {r}, {self.v(buf)}, {self.v(idx)}, "
+                      f"{self.v(mask)});")
+            return None
         loaded = self.mem_to_value(e, f"{self.v(buf)}[{self.lane(idx)}]", 2)
         self.line(f"for (int k = 0; k < {self.W}; ++k) "
                   f"if ({self.lane(mask)}) {self.lane_ref(r, ins.type)} = {loaded};")
         return None
+
+    def gather_macro(self, e: str, idx: ir.Value, mask: ir.Value) -> str | None:
+        """The prelude's gather macro for 4-byte elements (buffer type ``e``) at varying
+        i32 indices under a varying mask (``RDSL_GATHER32``: one instruction where the
+        compiler targets AVX2 or AVX-512, else a lane loop), or None (the loop here)."""
+        if e not in ("f32", "i32", "u32") or idx.type.name != "i32" \
+                or idx.type.lanes == 1 or mask.type.lanes == 1:  # type: ignore[attr-defined]
+            return None
+        return "RDSL_GATHER32"
 
     def render_scatter(self, ins: ir.Instr) -> None:
         buf, idx, val, mask = ins.operands

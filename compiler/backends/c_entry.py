@@ -25,6 +25,16 @@ _INTRINSICS = {  # W -> (guard, sqrt, floor, ceil, any) on x86
          "_mm512_test_epi32_mask((__m512i)(m), (__m512i)(m)) != 0", "__m512"),
 }
 
+_GATHER = {  # W -> (guard, the gather of 32-bit lanes) on x86
+    4: ("defined(__AVX2__)", "_mm_mask_i32gather_epi32(_mm_setzero_si128(), "
+        "(const int*)(base), (__m128i)(idx), (__m128i)(m), 4)"),
+    8: ("defined(__AVX2__)", "_mm256_mask_i32gather_epi32(_mm256_setzero_si256(), "
+        "(const int*)(base), (__m256i)(idx), (__m256i)(m), 4)"),
+    16: ("defined(__AVX512F__)", "_mm512_mask_i32gather_epi32(_mm512_setzero_si512(), "
+         "_mm512_test_epi32_mask((__m512i)(m), (__m512i)(m)), (__m512i)(idx), "
+         "(const void*)(base), 4)"),
+}
+
 
 def prelude(width: int, stem: str) -> list[str]:
     """Includes, the vector types of ``width`` and the macros the bodies use."""
@@ -63,6 +73,15 @@ def prelude(width: int, stem: str) -> list[str]:
             f"#define RDSL_FLOOR(r, a) do {{ {loop} (r)[k_] = floorf((a)[k_]); }} while (0)",
             f"#define RDSL_CEIL(r, a) do {{ {loop} (r)[k_] = ceilf((a)[k_]); }} while (0)",
             f"#define RDSL_ANY(r, m) do {{ (r) = 0; {loop} (r) |= (m)[k_] != 0; }} while (0)",
+            "#endif", "",
+            "/* r = base[idx] (4-byte elements, i32 indices) in the lanes where m (0 or -1)",
+            " * is set; r is 0 elsewhere and was declared 0: one gather instruction */",
+            f"#if (defined(__x86_64__) || defined(__i386__)) && {_GATHER[W][0]}",
+            "#define RDSL_GATHER32(VT, r, base, idx, m) \\",
+            f"    ((r) = (VT){_GATHER[W][1]})",
+            "#else",
+            "#define RDSL_GATHER32(VT, r, base, idx, m) do { \\",
+            f"    {loop} if ((m)[k_]) (r)[k_] = (base)[(idx)[k_]]; }} while (0)",
             "#endif", "",
             "/* W elements from base + i * stride on: one load when contiguous and full */",
             "#define RDSL_LOAD(VT, ET, v, base, stride, i, nl) do { \\",

@@ -101,6 +101,9 @@ class OpenCLPrinter(SimdC):
     def zero(self, t: ir.ScalarType) -> str:
         return "0" if t.lanes == 1 else f"(({self.ctype(t)})(0))"
 
+    def gather_macro(self, e: str, idx: ir.Value, mask: ir.Value) -> None:
+        return None  # no intrinsics: the lane loop, which PoCL vectorizes as it can
+
     def render_divrem(self, ins: ir.Instr) -> str | None:
         t = self.elem(ins)
         if t.lanes > 1 and t.is_float and ins.op is ir.Op.REM:
