@@ -1,7 +1,8 @@
 """Gathers in the SIMD C backend (``RDSL_GATHER32``): a varying load of 4-byte elements at
 i32 indices is one gather instruction where ``cc`` targets AVX2 (widths 4, 8) or AVX-512
 (width 16), and a lane loop elsewhere; both load the active lanes only (an inactive lane's
-index may lie far outside the buffer) and give 0 in the others."""
+index may lie far outside the buffer) and give 0 in the others.  And ``$RDSL_CFLAGS``, the
+extra flags of ``cc`` (bench/targets.py builds its c row with ``-O3``)."""
 
 from __future__ import annotations
 
@@ -14,6 +15,7 @@ import pytest
 import rdsl
 from rdsl.compiler.backends.c_build import CFLAGS, build_c_library, compile_shared
 from rdsl.compiler.build import Build
+from rdsl.compiler.diagnostics import CompileError
 from rdsl.compiler.driver import compile_kernels
 from rdsl.compiler.targets import get_target, host_supports
 
@@ -80,3 +82,22 @@ def test_gather_is_one_instruction_where_the_isa_has_it(width: int, isa: str,
 
     assert gathers(CFLAGS) >= 2  # the table's and the ids' loads
     assert gathers(PORTABLE) == 0
+
+
+def test_rdsl_cflags_are_added_and_keyed(tmp_path: Path, monkeypatch):
+    """``RDSL_CFLAGS`` follows the default flags (a later ``-O3`` wins), the manifest
+    records them, the kernel cache keeps the build apart, and a flag cc refuses is a
+    diagnostic naming it."""
+    monkeypatch.setenv("RDSL_CACHE_DIR", str(tmp_path / "cache"))
+    table, ids = np.arange(64, dtype=np.float32), np.zeros(64, np.int32)
+    i = np.arange(-8, 72, dtype=np.int32)
+    plain = rdsl.jit(SRC, target="c", width=8)
+    monkeypatch.setenv("RDSL_CFLAGS", "-O3 -fno-unroll-loops")
+    tuned = rdsl.jit(SRC, target="c", width=8)
+    assert tuned.path != plain.path and not tuned.from_cache
+    assert tuned.manifest["cflags"][-2:] == ["-O3", "-fno-unroll-loops"]
+    assert "-O3" not in plain.manifest["cflags"]
+    assert np.array_equal(tuned["pick"](table, ids, i), plain["pick"](table, ids, i))
+    monkeypatch.setenv("RDSL_CFLAGS", "-fno-such-flag-rdsl")
+    with pytest.raises(CompileError, match="-fno-such-flag-rdsl"):
+        rdsl.jit(SRC, target="c", width=8)
