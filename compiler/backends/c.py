@@ -48,6 +48,7 @@ class SimdC(CLikePrinter):
     """The C-like printer with varying values as vector-extension types of ``width``."""
 
     target_name: ClassVar[str] = "c"
+    float_minmax: ClassVar[bool] = True  # f32 min/max through the prelude's RDSL_MINF/MAXF
 
     def __init__(self, width: int, *args, **kwargs) -> None:
         super().__init__(*args, **kwargs)
@@ -93,6 +94,13 @@ class SimdC(CLikePrinter):
     def select_cmp(self, t: ir.ScalarType, cond: str, a: str, b: str) -> str:
         return super().select_cmp(t, cond, a, b) if t.lanes == 1 else \
             self.select_raw(t, cond, a, b)
+
+    def render_minmax(self, ins: ir.Instr) -> str:
+        t = ins.type
+        if t.lanes == 1 or t.name != "f32" or not self.float_minmax:
+            return super().render_minmax(ins)
+        a, b = self.operands(ins)  # x86's minps/maxps are select(a < b, a, b), exactly
+        return f"RDSL_{'MIN' if ins.op is ir.Op.MIN else 'MAX'}F({a}, {b})"
 
     def render_cmp(self, ins: ir.Instr) -> str:
         r = super().render_cmp(ins)

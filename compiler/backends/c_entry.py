@@ -25,6 +25,11 @@ _INTRINSICS = {  # W -> (guard, sqrt, floor, ceil, any) on x86
          "_mm512_test_epi32_mask((__m512i)(m), (__m512i)(m)) != 0", "__m512"),
 }
 
+_MINMAX = {  # W -> (guard, min, max): minps(a, b) is a < b ? a : b, maxps a > b ? a : b
+    4: ("defined(__SSE__)", "_mm_min_ps", "_mm_max_ps", "__m128"),
+    8: ("defined(__AVX__)", "_mm256_min_ps", "_mm256_max_ps", "__m256"),
+    16: ("defined(__AVX512F__)", "_mm512_min_ps", "_mm512_max_ps", "__m512"),
+}
 _GATHER = {  # W -> (guard, the gather of 32-bit lanes) on x86
     4: ("defined(__AVX2__)", "_mm_mask_i32gather_epi32(_mm_setzero_si128(), "
         "(const int*)(base), (__m128i)(idx), (__m128i)(m), 4)"),
@@ -61,6 +66,7 @@ def prelude(width: int, stem: str) -> list[str]:
     out += ["typedef rdsl_i32v rdsl_maskv; /* a varying bool: every lane 0 or -1 */",
             "#define RDSL_SPLAT(T, x) ((T){" + ", ".join(["(x)"] * W) + "})", ""]
     guard, sqrt, floor, ceil, any_, m = _INTRINSICS[W]
+    mguard, vmin, vmax, mt = _MINMAX[W]
     loop = f"for (int k_ = 0; k_ < {W}; ++k_)"
     out += [f"#if (defined(__x86_64__) || defined(__i386__)) && {guard}",
             "#include <immintrin.h>",
@@ -74,6 +80,18 @@ def prelude(width: int, stem: str) -> list[str]:
             f"#define RDSL_CEIL(r, a) do {{ {loop} (r)[k_] = ceilf((a)[k_]); }} while (0)",
             f"#define RDSL_ANY(r, m) do {{ (r) = 0; {loop} (r) |= (m)[k_] != 0; }} while (0)",
             "#endif", "",
+            "/* f32 min(a, b) = a < b ? a : b and max(a, b) = a > b ? a : b, NaNs and signed",
+            " * zeros included: what minps/maxps compute */",
+            f"#if (defined(__x86_64__) || defined(__i386__)) && {mguard}",
+            "#include <immintrin.h>",
+            f"#define RDSL_MINF(a, b) ((rdsl_f32v){vmin}(({mt})(a), ({mt})(b)))",
+            f"#define RDSL_MAXF(a, b) ((rdsl_f32v){vmax}(({mt})(a), ({mt})(b)))",
+            "#else",
+            "#define RDSL_MINF(a, b) RDSL_SELECTF((a) < (b), a, b)",
+            "#define RDSL_MAXF(a, b) RDSL_SELECTF((a) > (b), a, b)",
+            "#endif",
+            "#define RDSL_SELECTF(m, a, b) \\",
+            "    ((rdsl_f32v)((((rdsl_i32v)(a)) & (m)) | (((rdsl_i32v)(b)) & ~(m))))", "",
             "/* r = base[idx] (4-byte elements, i32 indices) in the lanes where m (0 or -1)",
             " * is set; r is 0 elsewhere and was declared 0: one gather instruction */",
             f"#if (defined(__x86_64__) || defined(__i386__)) && {_GATHER[W][0]}",

@@ -1,8 +1,11 @@
-"""Gathers in the SIMD C backend (``RDSL_GATHER32``): a varying load of 4-byte elements at
-i32 indices is one gather instruction where ``cc`` targets AVX2 (widths 4, 8) or AVX-512
-(width 16), and a lane loop elsewhere; both load the active lanes only (an inactive lane's
-index may lie far outside the buffer) and give 0 in the others.  And ``$RDSL_CFLAGS``, the
-extra flags of ``cc`` (bench/targets.py builds its c row with ``-O3``)."""
+"""What the SIMD C backend prints as x86 intrinsics where ``cc`` targets them, and as
+portable vector code elsewhere, with the same results.  Gathers (``RDSL_GATHER32``): a
+varying load of 4-byte elements at i32 indices is one gather instruction under AVX2 (widths
+4, 8) or AVX-512 (width 16), a lane loop elsewhere; both load the active lanes only (an
+inactive lane's index may lie far outside the buffer) and give 0 in the others.  f32
+min/max (``RDSL_MINF``/``RDSL_MAXF``): minps/maxps, which are the IR's select(a < b, a, b)
+bit for bit, NaNs and signed zeros included.  And ``$RDSL_CFLAGS``, the extra flags of
+``cc`` (bench/targets.py builds its c row with ``-O3``)."""
 
 from __future__ import annotations
 
@@ -34,11 +37,12 @@ fn pick(table: [Float], ids: [Int], i: Int) -> Float {
 PORTABLE = tuple(f for f in CFLAGS if not f.startswith("-march="))  # no AVX2: the loop
 
 
-def build(tmp: Path, width: int, flags: tuple[str, ...]) -> tuple[rdsl.Module, Path]:
-    src = tmp / "pick.rdsl"
-    src.write_text(SRC)
+def build(tmp: Path, width: int, flags: tuple[str, ...], source: str = SRC
+          ) -> tuple[rdsl.Module, Path]:
+    src = tmp / "kernels.rdsl"
+    src.write_text(source)
     module, _ = compile_kernels(src, Build.of("c", "rgb", width))
-    stem = f"pick{width}_{len(flags)}"
+    stem = f"k{width}_{len(flags)}"
     paths = build_c_library(module, get_target("c", width), tmp, stem, source_only=True)
     compile_shared(paths["c"], tmp / f"{stem}.so", flags)
     return rdsl.load(tmp / f"{stem}.so"), paths["c"]
@@ -65,6 +69,25 @@ def test_masked_gather_loads_active_lanes_only(width: int, flags, tmp_path: Path
     assert "RDSL_GATHER32(" in c_path.read_text()
     got = mod["pick"](table, ids, i)
     assert np.array_equal(got, expected(table, ids, i))
+
+
+MINMAX = """
+fn lo(a: Float, b: Float) -> Float { return min(a, b); }
+fn hi(a: Float, b: Float) -> Float { return max(a, b); }
+"""
+
+
+@pytest.mark.parametrize("width", [4, 8, 16])
+@pytest.mark.parametrize("flags", [CFLAGS, PORTABLE], ids=["native", "portable"])
+def test_float_min_max_are_the_irs_selects(width: int, flags, tmp_path: Path):
+    special = np.array([np.nan, -0.0, 0.0, 1.0, -1.0, np.inf, -np.inf, 1e-45],
+                       np.float32)
+    a, b = (x.ravel() for x in np.meshgrid(special, special))
+    mod, c_path = build(tmp_path, width, flags, MINMAX)
+    assert "RDSL_MINF(" in c_path.read_text() and "RDSL_MAXF(" in c_path.read_text()
+    for name, want in (("lo", np.where(a < b, a, b)), ("hi", np.where(a > b, a, b))):
+        got = mod[name](a, b)
+        assert np.array_equal(got.view(np.uint32), want.view(np.uint32)), name
 
 
 @pytest.mark.skipif(shutil.which("objdump") is None, reason="no objdump on PATH")
