@@ -2,7 +2,8 @@
 portable vector code elsewhere, with the same results.  Gathers (``RDSL_GATHER32``): a
 varying load of 4-byte elements at i32 indices is one gather instruction under AVX2 (widths
 4, 8) or AVX-512 (width 16), a lane loop elsewhere; both load the active lanes only (an
-inactive lane's index may lie far outside the buffer) and give 0 in the others.  f32
+inactive lane's index may lie far outside the buffer) and give 0 in the others; scatters
+(``RDSL_SCATTER32``) likewise under AVX-512, lane 0 first as the loop.  f32
 min/max (``RDSL_MINF``/``RDSL_MAXF``): minps/maxps, which are the IR's select(a < b, a, b)
 bit for bit, NaNs and signed zeros included.  And ``$RDSL_CFLAGS``, the extra flags of
 ``cc`` (bench/targets.py builds its c row with ``-O3``)."""
@@ -71,6 +72,36 @@ def test_masked_gather_loads_active_lanes_only(width: int, flags, tmp_path: Path
     assert np.array_equal(got, expected(table, ids, i))
 
 
+SCATTER = """
+fn put(out: [Float], ids: [Int], i: Int, x: Float) {
+    if x > 0.0 {
+        out[i] = x;
+        ids[i] = i;
+    }
+}
+"""
+
+
+@pytest.mark.parametrize("width", [4, 8, 16])
+@pytest.mark.parametrize("flags", [CFLAGS, PORTABLE], ids=["native", "portable"])
+def test_masked_scatter_stores_active_lanes_in_order(width: int, flags, tmp_path: Path):
+    rng = np.random.default_rng(width)
+    n = 1001
+    i = rng.integers(0, 16, n).astype(np.int32)  # many lanes of a vector to one slot
+    x = rng.standard_normal(n).astype(np.float32)
+    off = x <= 0  # inactive lanes with indices ~8 GiB away
+    i[off] = rng.choice(np.array([-(1 << 31), (1 << 31) - 1]), off.sum())
+    out, ids = np.full(16, -5.0, np.float32), np.full(16, -5, np.int32)
+    want, want_ids = out.copy(), ids.copy()
+    for k in range(n):  # element by element: the last store to a slot wins
+        if x[k] > 0:
+            want[i[k]], want_ids[i[k]] = x[k], i[k]
+    mod, c_path = build(tmp_path, width, flags, SCATTER)
+    assert "RDSL_SCATTER32(" in c_path.read_text()
+    mod["put"](out, ids, i, x, threads=1)
+    assert np.array_equal(out, want) and np.array_equal(ids, want_ids)
+
+
 MINMAX = """
 fn lo(a: Float, b: Float) -> Float { return min(a, b); }
 fn hi(a: Float, b: Float) -> Float { return max(a, b); }
@@ -105,6 +136,17 @@ def test_gather_is_one_instruction_where_the_isa_has_it(width: int, isa: str,
 
     assert gathers(CFLAGS) >= 2  # the table's and the ids' loads
     assert gathers(PORTABLE) == 0
+
+
+@pytest.mark.skipif(shutil.which("objdump") is None, reason="no objdump on PATH")
+@pytest.mark.parametrize("width", [4, 8, 16])
+def test_scatter_is_one_instruction_under_avx512(width: int, tmp_path: Path):
+    if not host_supports(get_target("avx512")):
+        pytest.skip("this CPU has no AVX-512: -march=native builds the lane loop")
+    mod, _ = build(tmp_path, width, CFLAGS, SCATTER)
+    asm = subprocess.run(["objdump", "-d", str(mod.path)], capture_output=True, text=True,
+                         check=True).stdout
+    assert asm.count("vpscatterdd") >= 2  # out's and ids' stores
 
 
 def test_rdsl_cflags_are_added_and_keyed(tmp_path: Path, monkeypatch):

@@ -239,25 +239,35 @@ class SimdC(CLikePrinter):
         return None
 
     def gather_macro(self, e: str, idx: ir.Value, mask: ir.Value) -> str | None:
-        """The prelude's gather macro for 4-byte elements (buffer type ``e``) at varying
-        i32 indices under a varying mask (``RDSL_GATHER32``: one instruction where the
-        compiler targets AVX2 or AVX-512, else a lane loop), or None (the loop here)."""
-        if e not in ("f32", "i32", "u32") or idx.type.name != "i32" \
-                or idx.type.lanes == 1 or mask.type.lanes == 1:  # type: ignore[attr-defined]
-            return None
-        return "RDSL_GATHER32"
+        """The prelude's macro for a gather of 4-byte elements (buffer type ``e``) at
+        varying i32 indices under a varying mask (``RDSL_GATHER32``: one instruction where
+        the compiler targets AVX2 or AVX-512, else a lane loop), or None (the loop here)."""
+        return "RDSL_GATHER32" if _lanes_of_32_bits(e, idx, mask) else None
 
     def render_scatter(self, ins: ir.Instr) -> None:
         buf, idx, val, mask = ins.operands
         if mask.type.lanes == 1:
             return super().render_scatter(ins)
         e = buf.type.elem.name  # type: ignore[attr-defined]
+        if self.gather_macro(e, idx, mask) and val.type.lanes > 1:  # type: ignore[attr-defined]
+            # the scatter of the same lanes (AVX-512: lanes in order, the last one wins)
+            self.line(f"RDSL_SCATTER32({self.v(buf)}, {self.v(idx)}, {self.v(val)}, "
+                      f"{self.v(mask)});")
+            return None
         v = self.lane(val)
         if e == "bool":
             v = f"(uint8_t)({v} != 0)"
         self.line(f"for (int k = 0; k < {self.W}; ++k) "
                   f"if ({self.lane(mask)}) {self.v(buf)}[{self.lane(idx)}] = {v};")
         return None
+
+
+def _lanes_of_32_bits(e: str, idx: ir.Value, mask: ir.Value) -> bool:
+    """Whether a gather or scatter reaches 4-byte elements at varying i32 indices under a
+    varying mask (what one x86 gather or scatter instruction does)."""
+    t, m = idx.type, mask.type
+    assert isinstance(t, ir.ScalarType) and isinstance(m, ir.ScalarType)
+    return e in ("f32", "i32", "u32") and t.name == "i32" and t.lanes > 1 and m.lanes > 1
 
 
 # --------------------------------------------------------------------------------------

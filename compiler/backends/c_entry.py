@@ -40,6 +40,15 @@ _GATHER = {  # W -> (guard, the gather of 32-bit lanes) on x86
          "(const void*)(base), 4)"),
 }
 
+_SCATTER = {  # W -> (guard, the scatter of 32-bit lanes) on x86: AVX-512 only
+    W: (guard, f"{pre}_mask_i32scatter_epi32((void*)(base), {pre}_{test}_mask("
+           f"(__m{b}i)(m), (__m{b}i)(m)), (__m{b}i)(idx), (__m{b}i)(v), 4)")
+    for W, guard, pre, test, b in (
+        (4, "defined(__AVX512F__) && defined(__AVX512VL__)", "_mm", "test_epi32", 128),
+        (8, "defined(__AVX512F__) && defined(__AVX512VL__)", "_mm256", "test_epi32", 256),
+        (16, "defined(__AVX512F__)", "_mm512", "test_epi32", 512))
+}
+
 
 def prelude(width: int, stem: str) -> list[str]:
     """Includes, the vector types of ``width`` and the macros the bodies use."""
@@ -100,6 +109,14 @@ def prelude(width: int, stem: str) -> list[str]:
             "#else",
             "#define RDSL_GATHER32(VT, r, base, idx, m) do { \\",
             f"    {loop} if ((m)[k_]) (r)[k_] = (base)[(idx)[k_]]; }} while (0)",
+            "#endif",
+            "/* base[idx] = v in the lanes where m is set, lane 0 first (the last one wins) */",
+            f"#if (defined(__x86_64__) || defined(__i386__)) && {_SCATTER[W][0]}",
+            "#define RDSL_SCATTER32(base, idx, v, m) \\",
+            f"    {_SCATTER[W][1]}",
+            "#else",
+            "#define RDSL_SCATTER32(base, idx, v, m) do { \\",
+            f"    {loop} if ((m)[k_]) (base)[(idx)[k_]] = (v)[k_]; }} while (0)",
             "#endif", "",
             "/* W elements from base + i * stride on: one load when contiguous and full */",
             "#define RDSL_LOAD(VT, ET, v, base, stride, i, nl) do { \\",
