@@ -8,7 +8,7 @@ kernel alone (the device's own timing of the launch, without the copies to and f
 device).  Outputs are compared with the LLVM build's, bit for bit.  Not a test: run it by
 hand.
 
-    python bench/targets.py [--n 1048576] [--repeat 5]
+    python bench/plugin_targets.py [--n 1048576] [--repeat 5]
 """
 
 from __future__ import annotations
