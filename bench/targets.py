@@ -54,7 +54,7 @@ ROOT = Path(__file__).resolve().parents[1]
 OUT = ROOT / "out" / "targets"
 CBOX = ROOT / "examples" / "cbox" / "cbox.xml"
 sys.path.insert(0, str(ROOT / "bench"))
-from accel import BIG, terrain  # noqa: E402
+from accel import BIG, terrain
 
 MESH_N = 230  # vertices per side of the height field: 2 * 229^2 = 104,882 triangles
 

@@ -31,18 +31,18 @@ _MINMAX = {  # W -> (guard, min, max): minps(a, b) is a < b ? a : b, maxps a > b
     16: ("defined(__AVX512F__)", "_mm512_min_ps", "_mm512_max_ps", "__m512"),
 }
 _GATHER = {  # W -> (guard, the gather of 32-bit lanes) on x86
-    4: ("defined(__AVX2__)", "_mm_mask_i32gather_epi32(_mm_setzero_si128(), "
-        "(const int*)(base), (__m128i)(idx), (__m128i)(m), 4)"),
-    8: ("defined(__AVX2__)", "_mm256_mask_i32gather_epi32(_mm256_setzero_si256(), "
-        "(const int*)(base), (__m256i)(idx), (__m256i)(m), 4)"),
-    16: ("defined(__AVX512F__)", "_mm512_mask_i32gather_epi32(_mm512_setzero_si512(), "
-         "_mm512_test_epi32_mask((__m512i)(m), (__m512i)(m)), (__m512i)(idx), "
-         "(const void*)(base), 4)"),
+    4: ("defined(__AVX2__)", ("_mm_mask_i32gather_epi32(_mm_setzero_si128(), "
+                              "(const int*)(base), (__m128i)(idx), (__m128i)(m), 4)")),
+    8: ("defined(__AVX2__)", ("_mm256_mask_i32gather_epi32(_mm256_setzero_si256(), "
+                              "(const int*)(base), (__m256i)(idx), (__m256i)(m), 4)")),
+    16: ("defined(__AVX512F__)", ("_mm512_mask_i32gather_epi32(_mm512_setzero_si512(), "
+                                  "_mm512_test_epi32_mask((__m512i)(m), (__m512i)(m)), "
+                                  "(__m512i)(idx), (const void*)(base), 4)")),
 }
 
 _SCATTER = {  # W -> (guard, the scatter of 32-bit lanes) on x86: AVX-512 only
-    W: (guard, f"{pre}_mask_i32scatter_epi32((void*)(base), {pre}_{test}_mask("
-           f"(__m{b}i)(m), (__m{b}i)(m)), (__m{b}i)(idx), (__m{b}i)(v), 4)")
+    W: (guard, (f"{pre}_mask_i32scatter_epi32((void*)(base), {pre}_{test}_mask("
+                f"(__m{b}i)(m), (__m{b}i)(m)), (__m{b}i)(idx), (__m{b}i)(v), 4)"))
     for W, guard, pre, test, b in (
         (4, "defined(__AVX512F__) && defined(__AVX512VL__)", "_mm", "test_epi32", 128),
         (8, "defined(__AVX512F__) && defined(__AVX512VL__)", "_mm256", "test_epi32", 256),
