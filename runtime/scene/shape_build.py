@@ -1,0 +1,89 @@
+"""The loader's shapes: each shape's triangle mesh in world space (or its analytic sphere or
+disk), its BSDF, its area emitter and a nested irradiancemeter.
+
+:class:`ShapeFinisher` is a mixin of the loader's builder (loader.py), which calls
+``finish_shape`` once a shape's parameters and nested objects are collected.
+"""
+
+from __future__ import annotations
+
+import warnings
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from . import meshes
+from . import transform as xf
+from .analytic import Analytic
+from .cylinder import cylinder_frame, cylinder_mesh
+from .errors import scene_error
+from .meshes import MeshError
+from .nodes import param_loc as _loc
+from .reads import memoized
+from .sensors import attach_meter
+from .xml import ObjectNode
+
+if TYPE_CHECKING:
+    from .loader import Shape
+
+
+class ShapeFinisher:
+    """``finish_shape`` (a mixin of the loader's builder)."""
+
+    def finish_shape(self, obj: Shape, node: ObjectNode, objects: dict) -> None:
+        p = obj.params
+        m = p["to_world"] if p["to_world"] is not None else xf.identity()
+        if xf.singular(m):
+            raise scene_error(f"{self.what(node)}: 'to_world' is singular or not finite",
+                              _loc(node, "to_world"))
+        if obj.type == "sphere":
+            if p["radius"] <= 0:
+                raise scene_error("sphere: 'radius' must be positive", _loc(node, "radius"))
+            center = p["center"] if p["center"] is not None else np.zeros(3)
+            p["center"] = center
+            m = m @ xf.translate(center) @ xf.scale(p["radius"])
+            mesh = meshes.sphere()
+        elif obj.type in ("rectangle", "cube", "disk"):
+            mesh = getattr(meshes, obj.type)()
+        elif obj.type == "cylinder":
+            m, mesh = m @ cylinder_frame(p, lambda k: _loc(node, k)), cylinder_mesh()
+        else:
+            path = self.file(node, "filename", "mesh")
+            try:
+                mesh = memoized(path, (obj.type, p.get("flip_tex_coords"),
+                                       p.get("shape_index")),
+                                lambda: meshes.read_mesh(obj.type, path, obj.params))
+            except MeshError as e:
+                raise scene_error(f"{self.what(node)}: cannot load mesh file '{p['filename']}':"
+                                  f" {e}", _loc(node, "filename")) from None
+            except OSError as e:
+                raise scene_error(f"{self.what(node)}: cannot read mesh file "
+                                  f"'{p['filename']}': {e.strerror}",
+                                  _loc(node, "filename")) from None
+            p["filename"] = str(path)
+        if obj.type in ("sphere", "disk") and not p["triangulate"]:
+            obj.analytic = Analytic(obj.type, m, bool(p["flip_normals"]))
+            problem = obj.analytic.uniform_scale_problem()
+            if problem:  # Mitsuba warns and keeps a sphere of radius |to_world (1, 0, 0)|
+                loc = _loc(node, "to_world")
+                warnings.warn(f"{loc.file}:{loc.line}: sphere: {problem} (the sphere keeps "
+                              f"radius {obj.analytic.radius:g}); set 'triangulate' to render "
+                              "the transformed mesh instead", stacklevel=2)
+        face_normals = bool(p.get("face_normals") or mesh.face_normals)
+        p["to_world"] = m
+        try:
+            obj.mesh = meshes.to_world(mesh, m, p["flip_normals"], face_normals)
+        except MeshError as e:
+            raise scene_error(f"{self.what(node)}: {e}", _loc(node, "to_world")) from None
+        bsdfs, ems = objects["bsdf"], objects["emitter"]
+        # Mitsuba's default (shape.cpp): diffuse, black on an emitter's shape
+        obj.bsdf = bsdfs[0][0] if bsdfs else self.default(
+            "bsdf", "diffuse", **({"reflectance": 0.0} if ems else {}))
+        if ems:
+            em, ch = ems[0]
+            if em.type != "area" and em.decl is None:
+                raise scene_error(f"only an 'area' emitter can be attached to a shape, not "
+                                  f"'{em.type}'", ch.loc)
+            obj.emitter = em
+        if objects.get("sensor"):
+            attach_meter(obj, *objects["sensor"][0])
