@@ -43,7 +43,7 @@ from .schema import (
     plugin_types,
 )
 from .sensors import top_level_sensor
-from .shape_build import ShapeFinisher
+from .shape_build import ShapeFinisher, drawn_shapes, shape_points
 from .spectra import Color, as_reflectance, lookup_ior
 from .xml import Child, ObjectNode, Prop, SceneTree, read_scene
 
@@ -148,10 +148,11 @@ class _Builder(ShapeFinisher, Finishers):
             elif cat == "sensor":
                 sensors.append(top_level_sensor(obj, ch.loc))
             elif cat == "shape":
-                shapes.append(obj)
-                sensors += [obj.sensor] if obj.sensor is not None else []
-                if obj.emitter is not None:
-                    emitters.append(obj.emitter)
+                for shape in drawn_shapes(obj):
+                    shapes.append(shape)
+                    sensors += [shape.sensor] if shape.sensor is not None else []
+                    if shape.emitter is not None:
+                        emitters.append(shape.emitter)
             elif cat == "emitter":
                 if obj.type == "area" or obj.decl is not None:
                     raise scene_error(f"an '{obj.type}' emitter must be nested inside a "
@@ -177,7 +178,7 @@ class _Builder(ShapeFinisher, Finishers):
     def default_sensor(self, shapes: list[Shape]) -> Sensor:
         # Mitsuba frames the scene's bounding box with a 45 degree camera.
         if shapes:
-            pts = np.vstack([s.mesh.vertices for s in shapes]).astype(np.float64)
+            pts = np.vstack([shape_points(s) for s in shapes]).astype(np.float64)
             lo, hi = pts.min(axis=0), pts.max(axis=0)
         else:
             lo, hi = np.zeros(3), np.zeros(3)

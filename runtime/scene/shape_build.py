@@ -27,10 +27,51 @@ if TYPE_CHECKING:
     from .loader import Shape
 
 
+# shapes made of shapes: a shapegroup (drawn through its instances), an instance of one,
+# and merge (Mitsuba merges its meshes of one BSDF into one; rdsl renders them as they are)
+GROUPS = ("shapegroup", "instance", "merge")
+
+
 class ShapeFinisher:
     """``finish_shape`` (a mixin of the loader's builder)."""
 
+    def finish_group(self, obj: Shape, node: ObjectNode, objects: dict) -> None:
+        """A shapegroup's, an instance's or a merge's shapes, checked: an instance draws one
+        shapegroup; a shapegroup holds meshes without emitters or sensors (Embree has one
+        level of instancing) and its analytic shapes become their triangle meshes."""
+        shapes = objects.get("shape", [])
+        for child, ch in shapes:
+            what = f"a <ref> to shape '{ch.node.id}'" if ch.is_ref else f"a '{child.type}'"
+            if obj.type == "instance":
+                if child.type != "shapegroup":
+                    raise scene_error(f"instance: takes a <ref> to a 'shapegroup', got {what} "
+                                      "shape", ch.loc)
+                continue
+            if child.type == "shapegroup" or (obj.type == "shapegroup"
+                                              and child.type in GROUPS):
+                raise scene_error(f"{obj.type}: cannot hold {what} shape (rdsl instances one "
+                                  "level deep: give the shapegroup's shapes directly)", ch.loc)
+            if obj.type == "shapegroup" and (child.emitter is not None
+                                             or child.sensor is not None):
+                kind = "an emitter" if child.emitter is not None else "a sensor"
+                raise scene_error(f"shapegroup: a shape with {kind} cannot be instanced (as in "
+                                  "Mitsuba 3); declare it outside the shapegroup", ch.loc)
+        obj.children = [c for c, _ in shapes]
+        if obj.type == "shapegroup":
+            for child in obj.children:
+                child.analytic = None  # the instances' rays are in object space
+        if obj.type == "instance":
+            m = obj.params["to_world"]
+            m = xf.identity() if m is None else m
+            if xf.singular(m):
+                raise scene_error("instance: 'to_world' is singular or not finite",
+                                  _loc(node, "to_world"))
+            obj.params["to_world"] = m
+
     def finish_shape(self, obj: Shape, node: ObjectNode, objects: dict) -> None:
+        if obj.type in GROUPS:
+            self.finish_group(obj, node, objects)
+            return
         p = obj.params
         m = p["to_world"] if p["to_world"] is not None else xf.identity()
         if xf.singular(m):
@@ -87,3 +128,27 @@ class ShapeFinisher:
             obj.emitter = em
         if objects.get("sensor"):
             attach_meter(obj, *objects["sensor"][0])
+
+
+def drawn_shapes(shape: Shape) -> list[Shape]:
+    """What a shape declared in the scene draws: itself, a merge's shapes, or nothing for a
+    shapegroup (its instances draw it)."""
+    if shape.type == "shapegroup":
+        return []
+    if shape.type == "merge":
+        return [s for child in shape.children for s in drawn_shapes(child)]
+    return [shape]
+
+
+def shape_points(shape: Shape) -> np.ndarray:
+    """Points whose bounding box is the shape's (world space): its vertices, or for an
+    instance the corners of its shapegroup's box, transformed."""
+    if shape.type != "instance":
+        return shape.mesh.vertices
+    group = shape.children[0].children
+    if not group:
+        return np.zeros((0, 3))
+    pts = np.vstack([s.mesh.vertices for s in group]).astype(np.float64)
+    lo, hi = pts.min(axis=0), pts.max(axis=0)
+    corners = np.array([[(lo, hi)[(k >> a) & 1][a] for a in range(3)] for k in range(8)])
+    return xf.apply_points(shape.params["to_world"], corners)
