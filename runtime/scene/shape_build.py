@@ -41,16 +41,17 @@ class ShapeFinisher:
         level of instancing) and its analytic shapes become their triangle meshes."""
         shapes = objects.get("shape", [])
         for child, ch in shapes:
-            what = f"a <ref> to shape '{ch.node.id}'" if ch.is_ref else f"a '{child.type}'"
+            what = (f"shape '{ch.node.id}' (a '{child.type}')" if ch.is_ref
+                    else f"a nested '{child.type}' shape")
             if obj.type == "instance":
                 if child.type != "shapegroup":
-                    raise scene_error(f"instance: takes a <ref> to a 'shapegroup', got {what} "
-                                      "shape", ch.loc)
+                    raise scene_error(f"instance: takes a <ref> to a 'shapegroup', got {what}",
+                                      ch.loc)
                 continue
             if child.type == "shapegroup" or (obj.type == "shapegroup"
                                               and child.type in GROUPS):
-                raise scene_error(f"{obj.type}: cannot hold {what} shape (rdsl instances one "
-                                  "level deep: give the shapegroup's shapes directly)", ch.loc)
+                raise scene_error(f"{obj.type}: cannot hold {what} (rdsl instances one level "
+                                  "deep: give the shapegroup's shapes directly)", ch.loc)
             if obj.type == "shapegroup" and (child.emitter is not None
                                              or child.sensor is not None):
                 kind = "an emitter" if child.emitter is not None else "a sensor"
