@@ -108,6 +108,7 @@ class _Flattener:
         # id(shapegroup) -> (its Embree group, its meshes' (first triangle, bsdf, flags))
         self.groups: dict[int, tuple[EmbreeGroup, list[tuple[int, int, int]]]] = {}
         self.nv = self.nt = 0
+        self.tri_meshes: list[tuple[int, Any, Any]] = []  # (first triangle, mesh, BSDF)
 
     def bsdf_id(self, bsdf: Any) -> int:
         key = id(bsdf)
@@ -157,6 +158,7 @@ class _Flattener:
             return
         first = self.nt
         v, f, flags = self.triangles(shape.mesh)
+        self.tri_meshes.append((first, shape.mesh, shape.bsdf))
         self.items.append((v, f))
         if emitter >= 0:
             tri = v[f]
@@ -174,6 +176,7 @@ class _Flattener:
             for child in group.children:
                 first = self.nt
                 v, f, flags = self.triangles(child.mesh)
+                self.tri_meshes.append((first, child.mesh, child.bsdf))
                 parts.append((v, f))
                 entries.append((first, self.bsdf_id(child.bsdf), flags | INSTANCED))
             self.groups[id(group)] = (EmbreeGroup(parts), entries)
@@ -187,6 +190,7 @@ class _Flattener:
             self.G.append(np.array([first, bsdf, 0, flags], np.int32))
 
     def finish(self, desc: Any) -> SceneBuffers:
+        self.textures.fill_attributes(self.tri_meshes)
         # the records follow the vertices in P; their G entries point at them
         analytic_lights = {}
         for j, (row, column, record) in enumerate(self.records):

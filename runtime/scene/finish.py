@@ -14,6 +14,7 @@ import numpy as np
 
 from . import transform as xf
 from .errors import scene_error
+from .mesh_attributes import PREFIXES
 from .nodes import param_loc as _loc
 from .principled import resolve_principled
 from .samplers import finish_sampler
@@ -74,6 +75,13 @@ class Finishers:
 
     def finish_texture(self, obj: Plugin, node: ObjectNode, objects: dict) -> None:
         p = obj.params
+        if obj.type == "mesh_attribute" and obj.decl is None:
+            if not p["name"].startswith(PREFIXES) or p["name"] in PREFIXES:
+                raise scene_error(f"mesh_attribute: 'name' is '{p['name']}'; an attribute is "
+                                  "named vertex_<name> (interpolated across each triangle) or "
+                                  "face_<name> (one value per triangle), such as vertex_color",
+                                  _loc(node, "name"))
+            return
         if p.get("to_uv") is None and (obj.decl is None or "to_uv" in p):
             p["to_uv"] = xf.identity()
         if obj.type == "bitmap" and obj.decl is None:

@@ -210,6 +210,9 @@ _SPECS = [
         "raw": P("boolean", False)}),
     PluginSpec("texture", "checkerboard", {**_TEX, "color0": P("color", 0.4),
                                            "color1": P("color", 0.2)}),
+    # a PLY mesh's per-vertex or per-face attribute (runtime/scene/mesh_attributes.py)
+    PluginSpec("texture", "mesh_attribute", {"name": P("string", REQUIRED),
+                                             "scale": P("float", 1.0)}),
     # emitters
     PluginSpec("emitter", "area", {"radiance": P("color", 1.0)}),
     PluginSpec("emitter", "point", {"intensity": P("color", 1.0), "position": P("point"),

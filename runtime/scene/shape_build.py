@@ -17,6 +17,7 @@ from . import transform as xf
 from .analytic import Analytic
 from .cylinder import cylinder_frame, cylinder_mesh
 from .errors import scene_error
+from .mesh_attributes import check_attributes
 from .meshes import MeshError
 from .nodes import param_loc as _loc
 from .reads import memoized
@@ -129,6 +130,9 @@ class ShapeFinisher:
             obj.emitter = em
         if objects.get("sensor"):
             attach_meter(obj, *objects["sensor"][0])
+        problem = check_attributes(obj, f"shape '{obj.type}'")
+        if problem is not None:
+            raise scene_error(problem[0], problem[1].loc)
 
 
 def drawn_shapes(shape: Shape) -> list[Shape]:
