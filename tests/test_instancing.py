@@ -87,20 +87,20 @@ def test_ten_thousand_instances_cost_memory_once(tmp_path):
 
 
 BAD = {
-    "not_a_group": ('<shape type="rectangle" id="r"/><shape type="instance"><ref id="r"/>'
-                    '</shape>', "instance: takes a <ref> to a 'shapegroup', got shape 'r' "
-                    "(a 'rectangle')"),
+    "not_a_group": (('<shape type="rectangle" id="r"/><shape type="instance"><ref id="r"/>'
+                    '</shape>'), ("instance: takes a <ref> to a 'shapegroup', got shape 'r' "
+                    "(a 'rectangle')")),
     "no_group": ('<shape type="instance"/>', "shape 'instance' takes 1 nested <shape>, got 0"),
-    "emitter": ('<shape type="shapegroup"><shape type="rectangle"><emitter type="area"/>'
-                '</shape></shape>', "shapegroup: a shape with an emitter cannot be instanced"),
+    "emitter": (('<shape type="shapegroup"><shape type="rectangle"><emitter type="area"/>'
+                '</shape></shape>'), "shapegroup: a shape with an emitter cannot be instanced"),
     "nested": ('<shape type="shapegroup"><shape type="shapegroup"/></shape>',
                "shapegroup: cannot hold a nested 'shapegroup' shape"),
-    "singular": ('<shape type="shapegroup" id="g"/><shape type="instance"><ref id="g"/>'
-                 '<transform name="to_world"><scale x="0"/></transform></shape>',
+    "singular": (('<shape type="shapegroup" id="g"/><shape type="instance"><ref id="g"/>'
+                 '<transform name="to_world"><scale x="0"/></transform></shape>'),
                  "instance: 'to_world' is singular or not finite"),
     "group_param": ('<shape type="shapegroup"><float name="radius" value="1"/></shape>',
-                    "unknown parameter 'radius' of shape 'shapegroup'; accepted: no "
-                    "parameters"),
+                    ("unknown parameter 'radius' of shape 'shapegroup'; accepted: no "
+                    "parameters")),
     "merge_group": ('<shape type="merge"><shape type="shapegroup"/></shape>',
                     "merge: cannot hold a nested 'shapegroup' shape"),
 }

@@ -121,16 +121,16 @@ BAD = {
     "prefix": (ply_shape(f'<bsdf type="diffuse">{texture("color")}</bsdf>'),
                "mesh_attribute: 'name' is 'color'; an attribute is named vertex_<name>"),
     "unknown": (ply_shape(f'<bsdf type="diffuse">{texture("vertex_colour")}</bsdf>'),
-                "mesh_attribute: shape 'ply' has no attribute 'vertex_colour' (its attributes: "
-                "face_id, face_k, vertex_color, vertex_q_color, vertex_w)"),
-    "not_a_mesh": (f'<shape type="disk"><bsdf type="diffuse">{texture("vertex_color")}</bsdf>'
-                   '</shape>', "mesh_attribute 'vertex_color': shape 'disk' is not a triangle "
-                   "mesh and has no attributes"),
-    "no_attributes": (f'<shape type="cube"><bsdf type="diffuse">{texture("face_id")}</bsdf>'
-                      '</shape>', "mesh_attribute: shape 'cube' has no attribute 'face_id' "
-                      "(its attributes: none)"),
-    "no_name": ('<shape type="cube"><bsdf type="diffuse"><texture type="mesh_attribute" '
-                'name="reflectance"/></bsdf></shape>',
+                ("mesh_attribute: shape 'ply' has no attribute 'vertex_colour' (its attributes: "
+                "face_id, face_k, vertex_color, vertex_q_color, vertex_w)")),
+    "not_a_mesh": ((f'<shape type="disk"><bsdf type="diffuse">{texture("vertex_color")}</bsdf>'
+                   '</shape>'), ("mesh_attribute 'vertex_color': shape 'disk' is not a triangle "
+                   "mesh and has no attributes")),
+    "no_attributes": ((f'<shape type="cube"><bsdf type="diffuse">{texture("face_id")}</bsdf>'
+                      '</shape>'), ("mesh_attribute: shape 'cube' has no attribute 'face_id' "
+                      "(its attributes: none)")),
+    "no_name": (('<shape type="cube"><bsdf type="diffuse"><texture type="mesh_attribute" '
+                'name="reflectance"/></bsdf></shape>'),
                 "texture 'mesh_attribute' is missing the required parameter 'name'"),
     "scale_type": (ply_shape('<bsdf type="diffuse">' + texture(
         "vertex_color", extra='<string name="scale" value="big"/>') + '</bsdf>'),
