@@ -109,3 +109,20 @@ BAD = {
 @pytest.mark.parametrize("case", sorted(BAD))
 def test_bad_instancing(tmp_path, case):
     check_bad(tmp_path, *BAD[case])
+
+
+def test_default_camera_frames_instances_as_the_shapes_they_place(tmp_path):
+    """Without a sensor, the camera frames the instances' world-space bounds: the same camera
+    as for the group's shapes placed directly."""
+    from rdsl.runtime.scene import load_scene_description
+
+    move = '<rotate z="1" angle="30"/><translate x="2" y="-1"/>'
+    inst = tmp_path / "inst.xml"
+    inst.write_text('<scene version="3.0.0"><shape type="shapegroup" id="g"><shape type="cube"/>'
+                    '</shape><shape type="instance"><ref id="g"/><transform name="to_world">'
+                    f'{move}</transform></shape></scene>')
+    plain = tmp_path / "plain.xml"
+    plain.write_text(f'<scene version="3.0.0"><shape type="cube"><transform name="to_world">'
+                     f'{move}</transform></shape></scene>')
+    a, b = (load_scene_description(p).sensor["to_world"] for p in (inst, plain))
+    np.testing.assert_allclose(a, b, atol=1e-5)

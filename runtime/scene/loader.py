@@ -177,8 +177,8 @@ class _Builder(ShapeFinisher, Finishers):
 
     def default_sensor(self, shapes: list[Shape]) -> Sensor:
         # Mitsuba frames the scene's bounding box with a 45 degree camera.
-        if shapes:
-            pts = np.vstack([shape_points(s) for s in shapes]).astype(np.float64)
+        pts = np.vstack([np.zeros((0, 3)), *(shape_points(s) for s in shapes)])
+        if len(pts):
             lo, hi = pts.min(axis=0), pts.max(axis=0)
         else:
             lo, hi = np.zeros(3), np.zeros(3)

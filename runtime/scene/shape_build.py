@@ -130,7 +130,8 @@ class ShapeFinisher:
             obj.emitter = em
         if objects.get("sensor"):
             attach_meter(obj, *objects["sensor"][0])
-        problem = check_attributes(obj, f"shape '{obj.type}'")
+        problem = check_attributes(obj, f"shape '{obj.id}' ({obj.type})" if obj.id
+                                   else f"shape '{obj.type}'")
         if problem is not None:
             raise scene_error(problem[0], problem[1].loc)
 
