@@ -126,3 +126,16 @@ def test_default_camera_frames_instances_as_the_shapes_they_place(tmp_path):
                      f'{move}</transform></shape></scene>')
     a, b = (load_scene_description(p).sensor["to_world"] for p in (inst, plain))
     np.testing.assert_allclose(a, b, atol=1e-5)
+
+
+def test_too_many_copies_for_the_bvh_is_a_clear_error(tmp_path, monkeypatch):
+    """The rdsl BVH copies instances; past a bound of triangles that is an error naming the
+    instance's line and Embree's instancing, not hours of BVH building."""
+    import rdsl
+    from rdsl.compiler.diagnostics import CompileError
+    from rdsl.runtime.render import flatten
+
+    monkeypatch.setattr(flatten, "MAX_COPIED_TRIANGLES", 100)
+    path = write_scene(tmp_path, GROUP)
+    with pytest.raises(CompileError, match=r"copied into [\d,]+ triangles.*--accel embree"):
+        rdsl.load_scene(path, accel="bvh")

@@ -222,6 +222,22 @@ def world_copies(shape: Any) -> list[Any]:
             for child in shape.children[0].children]
 
 
+# the most triangles that copies of instances may add where they cannot be instanced (the
+# rdsl BVH): beyond it the copies' memory and the BVH's build time are the problem
+MAX_COPIED_TRIANGLES = 20_000_000
+
+
+def _check_copies(shapes: list[Any]) -> None:
+    instances = [s for s in shapes if s.type == "instance"]
+    total = sum(len(c.mesh.faces) for s in instances for c in s.children[0].children)
+    if total > MAX_COPIED_TRIANGLES:
+        raise CompileError(f"the rdsl BVH (--accel bvh) has no instances: the scene's "
+                           f"{len(instances)} instances would be copied into {total:,} "
+                           f"triangles (more than {MAX_COPIED_TRIANGLES:,}); render on the CPU "
+                           "with Embree (--accel embree), which stores each shapegroup once",
+                           instances[0].loc)
+
+
 def flatten(desc: Any, triangulate: bool = False, model: ColorModel = RGB,
             instancing: bool = True) -> tuple[SceneBuffers, list[Instance], list[Instance]]:
     """Concatenate the scene's meshes and collect its BSDF and emitter instances.  Analytic
@@ -229,6 +245,8 @@ def flatten(desc: Any, triangulate: bool = False, model: ColorModel = RGB,
     vertices), unless ``triangulate`` asks for every shape's triangle mesh.  Instances of a
     shapegroup share its triangles (``instancing``) or become copies in world space.
     Colours in buffers are stored as ``model`` reads them (runtime/render/colors.py)."""
+    if not instancing:
+        _check_copies(desc.shapes)
     fl = _Flattener(model)
     for shape_index, shape in enumerate(desc.shapes):
         if shape.type != "instance":

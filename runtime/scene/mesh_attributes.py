@@ -101,11 +101,11 @@ def check_attributes(shape: Any, what: str) -> tuple[str, Any] | None:
     for tex in attribute_textures(shape.bsdf):
         name = tex.params["name"]
         if shape.analytic is not None:
-            return (f"mesh_attribute '{name}': {what} is not a triangle mesh and has no "
-                    "attributes (they come from PLY files)", tex)
+            return ((f"mesh_attribute '{name}': {what} is not a triangle mesh and has no "
+                    "attributes (they come from PLY files)"), tex)
         have = shape.mesh.attributes
         if name not in have:
             listed = ", ".join(sorted(have)) or "none"
-            return (f"mesh_attribute: {what} has no attribute '{name}' (its attributes: "
-                    f"{listed})", tex)
+            return ((f"mesh_attribute: {what} has no attribute '{name}' (its attributes: "
+                    f"{listed})"), tex)
     return None
