@@ -27,7 +27,7 @@ import bsdf.roughconductor;
 fn perturbed_at(wi: Vec3, pn: Vec4) -> Interaction {
     let z = Vec3(0.0, 0.0, 1.0);
     let si = Surface { p: Vec3(0.0), n: z, sh_n: z, uv: Vec2(0.5, 0.5), wi: wi, t: 1.0,
-                       valid: true };
+                       valid: true, prim: -1, bary: Vec2(0.0) };
     let it = Interaction { si: si, frame: Frame { s: Vec3(1.0, 0.0, 0.0), t: Vec3(0.0, 1.0, 0.0),
                                                   n: z },
                            ng: z, shape: 0, bsdf: 0, emitter: -1, dp_du: Vec3(1.0, 0.0, 0.0),
