@@ -44,8 +44,10 @@ from .ad_tape import sweep_blocks
 
 DEFAULT_THRESHOLD = 10
 
-# a weight: a float, a primal Value, or ("inv", w) 1/w, ("sel", cond, flip) 1 or 0 (flip: 0
-# or 1), ("mul", w, w), ("add", w, w)
+# a weight: a float, a primal Value, or ("inv", w) 1/w, ("sel", cond, flip, w) w where cond
+# (flip: where not cond) and else 0, ("mul", w, w), ("add", w, w).  A select stays a select
+# (never a product with 0 or 1): an infinite partial the primal sweep selected away must
+# not become inf * 0 = NaN.
 W = Union[float, Value, tuple]
 
 
@@ -149,7 +151,7 @@ class _Sweep:
             out: list[tuple[Value, W]] = []
             for val, flip in ((x[1], False), (x[2], True)):
                 if val in A:
-                    out.append((val, ("sel", x[0], flip)))
+                    out.append((val, ("sel", x[0], flip, 1.0)))
                 elif self._coef(val) != 0.0:
                     return None
             return out
@@ -288,15 +290,22 @@ class _Sweep:
             return a
         if isinstance(w, float) and w == -1.0:
             return b.op(Op.NEG, F32, a)
+        if isinstance(w, tuple) and w[0] == "sel":
+            c, t, zero = self._weight(w[1], b, local), self._apply(a, w[3], b, local), \
+                b.const(0.0, F32)
+            return b.op(Op.SELECT, F32, c, *((zero, t) if w[2] else (t, zero)))
+        return b.op(Op.MUL, F32, a, self._weight(w, b, local))
+
+    def _weight(self, w: W, b: Builder, local: dict) -> Value:
+        """The value of ``w`` for the sweep: computed at the end of the forward part if it
+        varies there, else where the sweep is."""
         if w in self.memo:
-            wv = self.memo[w]
-        elif w in local:
-            wv = local[w]
-        elif self._varies(w) and self._can_move(w):
-            wv = self._emit(w, Builder(self.head, b.loc), self.memo, True)
-        else:
-            wv = self._emit(w, b, local, False)
-        return b.op(Op.MUL, F32, a, wv)
+            return self.memo[w]
+        if w in local:
+            return local[w]
+        if self._varies(w) and self._can_move(w):
+            return self._emit(w, Builder(self.head, b.loc), self.memo, True)
+        return self._emit(w, b, local, False)
 
     def _can_move(self, w: W) -> bool:
         """Whether weight ``w`` can be computed at the end of the forward part."""
@@ -328,9 +337,10 @@ class _Sweep:
         elif w[0] == "inv":
             v = b.op(Op.DIV, F32, b.const(1.0, F32), self._emit(w[1], b, memo, moved))
         elif w[0] == "sel":
-            one, zero = b.const(1.0, F32), b.const(0.0, F32)
+            zero = b.const(0.0, F32)
             c = self._emit(w[1], b, memo, moved)
-            v = b.op(Op.SELECT, F32, c, *((zero, one) if w[2] else (one, zero)))
+            x = self._emit(w[3], b, memo, moved)
+            v = b.op(Op.SELECT, F32, c, *((zero, x) if w[2] else (x, zero)))
         else:
             x, y = (self._emit(u, b, memo, moved) for u in w[1:])
             v = b.op(Op.MUL if w[0] == "mul" else Op.ADD, F32, x, y)
@@ -339,6 +349,10 @@ class _Sweep:
 
 
 def _mul(a: W, b: W) -> W:
+    if isinstance(a, tuple) and a[0] == "sel":
+        return ("sel", a[1], a[2], _mul(a[3], b))
+    if isinstance(b, tuple) and b[0] == "sel":
+        return ("sel", b[1], b[2], _mul(a, b[3]))
     if isinstance(a, float) and isinstance(b, float):
         return a * b
     if isinstance(a, float) and a == 1.0:
