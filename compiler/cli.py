@@ -89,7 +89,9 @@ def _ir(args: argparse.Namespace) -> int:
     from .printer import print_module
 
     elim = args.eliminate
-    if elim is None and args.print_after == "eliminate" and args.ad == "reverse":
+    if args.print_after == "eliminate" and args.ad != "reverse":
+        raise CompileError("`eliminate` runs in a reverse build: add --ad reverse")
+    if elim is None and args.print_after == "eliminate":
         elim = 10
     build = Build.of(args.target, args.variant, args.width, args.ad, elim or 0)
     names = pass_names() + ["lower", "all"]

@@ -164,6 +164,10 @@ def test_rdsl_ir_prints_after_eliminate(tmp_path):
     off = subprocess.run(run + ["eliminate", "--eliminate", "0"], capture_output=True,
                          text=True)
     assert off.returncode == 0 and "after eliminate" not in off.stdout
+    fwd = subprocess.run(run[:5] + ["--print-after", "eliminate"], capture_output=True,
+                         text=True)
+    assert fwd.returncode == 1 and "add --ad reverse" in fwd.stderr
+    assert "Traceback" not in fwd.stderr
 
 
 @needs_cbox
