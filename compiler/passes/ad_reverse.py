@@ -51,6 +51,7 @@ from . import Pass, register
 from .ad_forward import PARAM_BUFFER
 
 GRAD_BUFFER, ROW = "gPRM", "ad_row"
+SWEEP = "ad.sweep"  # on the first instruction of a sweep that follows its forward part
 _NO_DERIVATIVE = {Op.FLOOR, Op.CEIL, Op.CAST, Op.BITCAST, Op.CONST, Op.LOAD, Op.REM}
 
 
@@ -98,7 +99,9 @@ class _Reverse:
             a = Value(F32, f"a.{name}")
             seed_params.append(Param(a))
             self.acc(adj, v, a, b)
+        mark = len(fn.body.instrs)
         self.sweep(fn.body.instrs[:], adj, b)
+        _mark_sweep(fn.body, mark)
         grads = [adj.get(p.value) or b.const(0.0, F32) for p in seeds]
         ret.operands = [*ret.operands, *grads]
         fn.body.instrs.append(ret)
@@ -296,9 +299,11 @@ class _Reverse:
         new, m = self.clone_into(block, args, b)
         y = block.instrs[-1].operands
         local: dict[Value, Value] = {}
+        mark = len(b.block.instrs)
         for i, a in seeds.items():
             self.acc(local, m.get(y[i], y[i]), a, b)
         self.sweep(new, local, b)
+        _mark_sweep(b.block, mark)
         defined = {r for ins in new for r in _defined(ins)}
         return local, m, defined
 
@@ -462,6 +467,14 @@ _F32_JSON = {"kind": "scalar", "dtype": "f32"}
 
 def _zero(t) -> object:
     return 0.0 if t == F32 else False if t == BOOL else 0
+
+
+def _mark_sweep(block: Block, start: int) -> None:
+    """Tag the first instruction of the reverse sweep that follows a forward part in
+    ``block`` (a function's body, an adjoint loop's body): where ``eliminate`` and the tape
+    count (passes/ad_tape.py) split the block."""
+    if start < len(block.instrs):
+        block.instrs[start].attrs[SWEEP] = True
 
 
 def _one(ins: Instr) -> Block:

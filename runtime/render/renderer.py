@@ -258,13 +258,14 @@ class Scene:
         return gradient(self, names, loss_grad, spp, seed)
 
     def backward(self, d_img: Any, params: list[str], spp: int | None = None,
-                 seed: int | None = None, threads: int | None = None
-                 ) -> dict[str, np.ndarray]:
+                 seed: int | None = None, threads: int | None = None,
+                 eliminate: bool | int = False) -> dict[str, np.ndarray]:
         """d loss / d parameter for every name of ``params`` from d loss / d image, by one
-        adjoint render (reverse mode): runtime/render/backward.py."""
+        adjoint render (reverse mode): runtime/render/backward.py.  ``eliminate``: build
+        the adjoint kernel with graph elimination (True: threshold 10; docs/ad.md)."""
         from .backward import backward
 
-        return backward(self, d_img, params, spp, seed, threads)
+        return backward(self, d_img, params, spp, seed, threads, eliminate)
 
     def _folding(self, scene: SceneSpec) -> list[str]:
         """What the build folds (specialized) or reads at run time (generic), for the report."""
