@@ -38,7 +38,10 @@ class Inline(Pass):
         self.keep = self.keep_fn(module) if self.keep_fn is not None else set()
         self.done: set[str] = set()
         self.stack: list[tuple[str, Instr | None]] = []
-        for fn in list(module.functions.values()):
+        # only what the exported functions reach (the rest is deleted below): a scene's
+        # module holds every function of the stdlib files it imports
+        roots = [f for f in module.functions.values() if f.attrs.get("export")]
+        for fn in roots or list(module.functions.values()):
             self._inline_function(fn, None)
         called = _still_called(module)
         for name in [n for n, f in module.functions.items()
