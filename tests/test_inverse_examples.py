@@ -37,3 +37,19 @@ def test_light_radiance_example_descends(tmp_path):
     assert_descends(r["losses"], np.full(3, 5.0), r[ex.LIGHT], r["truth"])
     names = {p.name for p in tmp_path.iterdir()}
     assert {"radiance_before.png", "radiance_target.png", "radiance_after.png"} <= names
+
+
+@needs_cbox
+def test_texture_example_descends(tmp_path):
+    ex = example("texture")
+    r = ex.recover(res=32, spp=2, iterations=8, lr=0.1, decay=0.9, target_spp=64,
+                   folder=tmp_path, out=tmp_path, log=lambda line: None)
+    assert r[ex.TEXELS].shape == (64, 64, 3)
+    m = r["seen"]
+    assert m.sum() > 500, m.sum()  # the camera sees a good part of the wall
+    losses = np.asarray(r["losses"])
+    assert losses[-3:].mean() < 0.7 * losses[0], losses
+    err0 = np.abs(r["start"] - r["truth"])[m].mean()
+    err = np.abs(r[ex.TEXELS] - r["truth"])[m].mean()
+    assert err < 0.8 * err0, (err, err0)
+    assert (tmp_path / "texture_recovered.png").is_file()

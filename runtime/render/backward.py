@@ -20,12 +20,15 @@ of ``render_forward``'s derivative image with ``d_img`` (tests/test_ad_reverse.p
 
 from __future__ import annotations
 
+import os
+from concurrent.futures import ThreadPoolExecutor
+from functools import partial
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from ...compiler.diagnostics import CompileError
-from .differentiable import _lookup, ad_twin
+from .differentiable import Texels, _lookup, ad_twin
 from .film import film_reach, film_uniforms
 
 if TYPE_CHECKING:
@@ -84,6 +87,10 @@ def _weights(out: dict, n: int, cells: int) -> tuple[np.ndarray, np.ndarray]:
     return wx.reshape(-1, cells, m), wy.reshape(-1, cells, m)
 
 
+LANES = 16  # the widest SIMD packet: lanes of one packet add texel gradients into rows of
+# their own (array position mod LANES), each thread of the adjoint pass into LANES rows
+
+
 # long: two passes over the batches, then the reduction
 def backward(scene: Scene, d_img: Any, params: list[str], spp: int | None = None,
              seed: int | None = None, threads: int | None = None) -> dict[str, np.ndarray]:
@@ -120,30 +127,100 @@ def backward(scene: Scene, d_img: Any, params: list[str], spp: int | None = None
         out = plain["render_sample"](j, rs, *scene.buffers.args(), prm, threads=threads)
         wx, wy = _weights(out, n, cells)
         outs.append((wx, wy))
-        per_tap += np.einsum("scr,scq->crq", wy, wx, dtype=np.float64)
+        # sum over the samples of wy wx^T, per cell: a batched matrix product
+        per_tap += np.matmul(wy.transpose(1, 2, 0).astype(np.float64),
+                             wx.transpose(1, 0, 2).astype(np.float64))
     h, w = film["crop_h"], film["crop_w"]
     weights = np.bincount(pix[ok], per_tap[ok], h * w).reshape(h, w)
     g = d / np.where(weights == 0, 1.0, weights)[..., None]
     g_taps = np.where(ok[..., None], g.reshape(h * w, -1)[pix], 0.0)  # (cells, r, q, C)
+    m, c = g_taps.shape[1], g_taps.shape[3]
+    g_qrx = np.ascontiguousarray(g_taps.transpose(0, 2, 1, 3), np.float32).reshape(-1, m, m * c)
     kernel = next(k for k in mod.manifest["kernels"] if k["name"] == "render_sample")
     names = [p["name"] for p in kernel["params"]]
     total = np.zeros(prm.size, np.float64)
+    texels = _TexelGradient(scene.buffers.T, any(isinstance(c, Texels)
+                                                 for c in chosen.values()), threads)
     for (j, rs), (wx, wy) in zip(batches, outs):  # 2. and 3.
-        a = np.einsum("scr,scq,crqx->scx", wy, wx, g_taps.astype(np.float32),
-                      optimize=True).reshape(j.size, -1)
+        a = _sample_adjoints(wx, wy, g_qrx)
         seeds = {f"a_ret_value_{c}": a[:, i] for i, c in enumerate("xyz"[:a.shape[1]])}
         if a.shape[1] == 1:
             seeds = {"a_ret_value": a[:, 0]}
-        args = []
         grad = np.zeros(j.size * prm.size, np.float32)
-        for name in names[names.index("PRM") + 1:]:
-            if name == "gPRM":
-                args.append(grad)
-            elif name == "ad_row":
-                args.append(j * np.int32(prm.size))
-            else:
-                args.append(seeds.get(name, np.zeros(j.size, np.float32)))
-        mod["render_sample"](j, rs, *scene.buffers.args(), prm, *args, threads=threads)
+        varying = {"ad_row": j * np.int32(prm.size), "ad_row_T": texels.rows(j.size)} | seeds
+        uniform = {"gPRM": grad, "gT": texels.grad}
+        head = [rs, *scene.buffers.args(), prm]
+        rest = [(uniform[x], False) if x in uniform else
+                (varying.get(x, np.zeros(j.size, np.float32)), True)
+                for x in names[names.index("PRM") + 1:]]
+        texels.run(partial(_adjoint_part, mod["render_sample"], j, head, rest), j.size)
         total += grad.reshape(j.size, prm.size).sum(0, dtype=np.float64)
-    return {name: total[s.offset:s.offset + s.size].astype(np.float32)
-            for name, s in chosen.items()}
+    out = {}
+    for name, s in chosen.items():
+        if isinstance(s, Texels):
+            out[name] = texels.gradient(s)
+        else:
+            out[name] = total[s.offset:s.offset + s.size].astype(np.float32)
+    return out
+
+
+def _sample_adjoints(wx: np.ndarray, wy: np.ndarray, g_qrx: np.ndarray) -> np.ndarray:
+    """Each sample's adjoint, sum over the pixels it reaches of wy wx g (g: d_img over the
+    pixel's total weight, per cell as (columns, rows x channels)): (samples, channels).
+    Batched matrix products (numpy's einsum of the three took 3x as long)."""
+    s, cells, m = wx.shape
+    t = np.matmul(wx.transpose(1, 0, 2), g_qrx)  # (cells, s, rows x channels)
+    t = t.reshape(cells, s, m, -1) * wy.transpose(1, 0, 2)[..., None]
+    return t.sum(2).transpose(1, 0, 2).reshape(s * cells, -1)
+
+
+def _adjoint_part(kernel, j: np.ndarray, head: list, rest: list, lo: int, hi: int,
+                  threads: int | None) -> None:
+    """The adjoint kernel over samples [lo, hi) of a batch (``rest``: the adjoint's own
+    arguments and whether each is varying: those are sliced, the gradient buffers not)."""
+    kernel(j[lo:hi], *head, *[x[lo:hi] if varying else x for x, varying in rest],
+           threads=threads)
+
+
+class _TexelGradient:
+    """The gradient buffer ``gT`` of the texels and its rows: without texel parameters one
+    row that nobody reads (the adjoint kernel writes it anyway); with them, ``LANES`` rows per
+    thread, the threads each running a contiguous part of a batch (so no two lanes running
+    at once add into one row), summed at the end."""
+
+    def __init__(self, T: np.ndarray, wanted: bool, threads: int | None) -> None:
+        self.size = T.size
+        self.parts = max(1, int(threads or os.cpu_count() or 1)) if wanted else 1
+        rows = self.parts * LANES if wanted else 1
+        if rows * self.size >= 2 ** 31:
+            raise ValueError(f"texel gradients of {self.size} floats in {rows} rows exceed "
+                             "32-bit indices; use fewer threads")
+        self.wanted, self.threads = wanted, threads
+        self.grad = np.zeros(rows * self.size, np.float32)
+
+    def _bounds(self, n: int) -> list[tuple[int, int]]:
+        per = -(-n // self.parts)  # ceil: parts of whole packets
+        step = -(-per // LANES) * LANES
+        return [(lo, min(lo + step, n)) for lo in range(0, n, step)]
+
+    def rows(self, n: int) -> np.ndarray:
+        if not self.wanted:
+            return np.zeros(n, np.int32)
+        rows = np.empty(n, np.int32)
+        for p, (lo, hi) in enumerate(self._bounds(n)):
+            rows[lo:hi] = (p * LANES + np.arange(hi - lo) % LANES) * self.size
+        return rows
+
+    def run(self, call, n: int) -> None:
+        """``call(lo, hi, threads)`` over [0, n): at once, or part by part on threads."""
+        if not self.wanted or self.parts == 1:
+            call(0, n, self.threads if not self.wanted else 1)
+            return
+        with ThreadPoolExecutor(self.parts) as pool:
+            for f in [pool.submit(call, lo, hi, 1) for lo, hi in self._bounds(n)]:
+                f.result()
+
+    def gradient(self, texels: Texels) -> np.ndarray:
+        total = self.grad.reshape(-1, self.size).sum(0, dtype=np.float64)
+        g = sum(total[off:off + texels.size] / scale for off, scale in texels.copies)
+        return np.asarray(g, np.float32).reshape(texels.shape)
