@@ -11,6 +11,8 @@ first), the first iteration's seconds (which compiles the differentiated kernels
 them from the renderer's kernel cache), the peak RSS of the process and the recovered
 albedo.  ``--cold`` adds a first round with empty kernel caches (rdsl: a fresh
 ``$RDSL_CACHE_DIR``; Mitsuba: a fresh ``$HOME``, under which Dr.Jit keeps ``~/.drjit``).
+Before the measured rounds each renderer runs 2 iterations once, unmeasured, which fills
+its default kernel cache (a warm run loads its kernels from there).
 Mitsuba runs ``llvm_ad_rgb`` (``DRJIT_LIBLLVM_PATH``, default libLLVM 19 as Debian installs
 it).  Not a test: run it by hand (docs/ad.md has the numbers).
 """
@@ -97,14 +99,14 @@ def child(args) -> int:
     return 0
 
 
-def spawn(who: str, args, cold: bool) -> dict:
+def spawn(who: str, args, cold: bool, iterations: int | None = None) -> dict:
     env = dict(os.environ, DRJIT_LIBLLVM_PATH=os.environ.get("DRJIT_LIBLLVM_PATH", LIBLLVM))
     with tempfile.TemporaryDirectory(prefix="adbench-") as tmp:
         if cold:
             env["RDSL_CACHE_DIR" if who == "rdsl" else "HOME"] = tmp
         cmd = [sys.executable, __file__, "--child", who, "--res", str(args.res), "--spp",
                str(args.spp), "--max-depth", str(args.max_depth), "--iterations",
-               str(args.iterations), "--lr", str(args.lr)]
+               str(iterations or args.iterations), "--lr", str(args.lr)]
         t = time.perf_counter()
         p = subprocess.run(cmd, check=False, env=env, capture_output=True, text=True)
         wall = time.perf_counter() - t
@@ -157,6 +159,8 @@ def main() -> int:
           f"{args.iterations} iterations of Adam (lr {args.lr}) on {KEY}, MSE loss; "
           f"{os.cpu_count()} cores")
     runs = []
+    for who in ("rdsl", "mitsuba"):  # fill the default kernel caches (not measured)
+        spawn(who, args, False, iterations=2)
     schedule = [True] * args.cold + [False] * args.rounds
     for i, cold in enumerate(schedule):
         order = ("rdsl", "mitsuba") if i % 2 == 0 else ("mitsuba", "rdsl")

@@ -6,7 +6,8 @@ render: the generic kernel built with ``ad="reverse"`` (compiler/passes/ad_rever
 Per batch of samples:
 
 1. the plain generic kernel gives each sample's film weights, and so each pixel's total
-   weight (the film divides by it: a pixel is sum w v / sum w);
+   weight (the film divides by it: a pixel is sum w v / sum w), or those the last
+   ``render()`` of the same samples kept (in the generic build);
 2. each sample's adjoint is then sum over the pixels it reaches of w * d_img / total
    weight, computed here (it only moves numbers between the image and the samples);
 3. the adjoint kernel recomputes the sample and sweeps it backwards, adding the gradient of
@@ -123,8 +124,14 @@ def backward(scene: Scene, d_img: Any, params: list[str], spp: int | None = None
     pix, ok = _taps(film, n)
     per_tap = np.zeros(pix.shape)
     outs = []
-    for j, rs in batches:  # 1. the film's total weight per pixel
-        out = plain["render_sample"](j, rs, *scene.buffers.args(), prm, threads=threads)
+    # the film weights of the samples: those the last render() of these samples kept (they
+    # depend on where each sample falls on the film, not on the parameters), or a plain pass
+    kept = getattr(scene, "film_weights", None)
+    kept = kept[1] if kept and kept[0] == (spp, seed) and kept[1] is not None and \
+        len(kept[1]) == len(batches) else None
+    for b, (j, rs) in enumerate(batches):  # 1. the film's total weight per pixel
+        out = kept[b] if kept is not None else \
+            plain["render_sample"](j, rs, *scene.buffers.args(), prm, threads=threads)
         wx, wy = _weights(out, n, cells)
         outs.append((wx, wy))
         # sum over the samples of wy wx^T, per cell: a batched matrix product

@@ -488,6 +488,7 @@ class Scene:
         seed_bits = int(np.uint32(seed).view(np.int32))
         waiting = None  # (samples, n) of the rendered batch the film has not taken yet
         done = k = 0
+        keep = [] if self._prm_set and not self.derivative else None  # weights, for backward
         while done < spp or waiting is not None:
             job = None
             if done < spp:
@@ -504,6 +505,8 @@ class Scene:
                 mod["film_pass"](pixels, np.array([m, ns], np.int32), _film_samples(prev, ns),
                                  acc, threads=threads)
                 self.nonfinite += int(np.count_nonzero(prev["bad"]))
+                if keep is not None:
+                    keep.append({c: np.array(v) for c, v in prev.items() if c[0] == "w"})
                 bar.update(done)
             waiting = None
             if job is not None:
@@ -515,6 +518,7 @@ class Scene:
                     bar.finish()
                     raise RenderCancelled(f"cancelled after {done} of {spp} spp")
         bar.finish()
+        self.film_weights = ((spp, seed), keep)
         return develop(acc.get() if hasattr(acc, "get") else acc, dict(film, spp=spp))
 
     def _scene_args(self, mod: Any) -> list[Any]:
@@ -579,8 +583,6 @@ def load_dict(scene: dict, variant: str | ColorModel = "rgb", target: str | Targ
     """Load a scene given as Mitsuba 3's Python dictionary (``mi.load_dict``'s format):
     written out as XML (runtime/scene/dicts.py) under the kernel cache and loaded as
     :func:`load_scene` loads a file, user plugins found in the current folder first."""
-    import hashlib as _hashlib
-
     from ..cache import cache_dir
     from ..plugins import PluginRegistry
     from ..scene.dicts import dict_to_xml
@@ -590,7 +592,7 @@ def load_dict(scene: dict, variant: str | ColorModel = "rgb", target: str | Targ
     text = dict_to_xml(scene, PluginRegistry.for_scene(None, places))
     folder = cache_dir() / "dicts"
     folder.mkdir(parents=True, exist_ok=True)
-    path = folder / f"{_hashlib.sha256(text.encode()).hexdigest()[:20]}.xml"
+    path = folder / f"{hashlib.sha256(text.encode()).hexdigest()[:20]}.xml"
     if not path.is_file():
         tmp = path.with_suffix(f".{os.getpid()}.tmp")
         tmp.write_text(text)
