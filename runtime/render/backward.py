@@ -29,6 +29,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from ...compiler.diagnostics import CompileError
+from ...core.scene_spec import Slot
 from .differentiable import Texels, _lookup, ad_twin
 from .film import film_reach, film_uniforms
 
@@ -88,8 +89,10 @@ def _weights(out: dict, n: int, cells: int) -> tuple[np.ndarray, np.ndarray]:
     return wx.reshape(-1, cells, m), wy.reshape(-1, cells, m)
 
 
-LANES = 16  # the widest SIMD packet: lanes of one packet add texel gradients into rows of
-# their own (array position mod LANES), each thread of the adjoint pass into LANES rows
+LANES = 16  # the widest SIMD packet: lanes of one packet add gradients into rows of their
+# own (array position mod LANES), each part of the adjoint pass into LANES rows (_Parts)
+PARTS_PER_THREAD = 4
+CELLS_AT_ONCE = 2048
 
 
 # long: two passes over the batches, then the reduction
@@ -129,14 +132,14 @@ def backward(scene: Scene, d_img: Any, params: list[str], spp: int | None = None
     kept = getattr(scene, "film_weights", None)
     kept = kept[1] if kept and kept[0] == (spp, seed) and kept[1] is not None and \
         len(kept[1]) == len(batches) else None
+    scene.film_weights = None  # used once: its memory is free again
     for b, (j, rs) in enumerate(batches):  # 1. the film's total weight per pixel
         out = kept[b] if kept is not None else \
             plain["render_sample"](j, rs, *scene.buffers.args(), prm, threads=threads)
         wx, wy = _weights(out, n, cells)
         outs.append((wx, wy))
         # sum over the samples of wy wx^T, per cell: a batched matrix product
-        per_tap += np.matmul(wy.transpose(1, 2, 0).astype(np.float64),
-                             wx.transpose(1, 0, 2).astype(np.float64))
+        per_tap += np.matmul(wy.transpose(1, 2, 0), wx.transpose(1, 0, 2))
     h, w = film["crop_h"], film["crop_w"]
     weights = np.bincount(pix[ok], per_tap[ok], h * w).reshape(h, w)
     g = d / np.where(weights == 0, 1.0, weights)[..., None]
@@ -145,30 +148,23 @@ def backward(scene: Scene, d_img: Any, params: list[str], spp: int | None = None
     g_qrx = np.ascontiguousarray(g_taps.transpose(0, 2, 1, 3), np.float32).reshape(-1, m, m * c)
     kernel = next(k for k in mod.manifest["kernels"] if k["name"] == "render_sample")
     names = [p["name"] for p in kernel["params"]]
-    total = np.zeros(prm.size, np.float64)
-    texels = _TexelGradient(scene.buffers.T, any(isinstance(c, Texels)
-                                                 for c in chosen.values()), threads)
+    parts = _Parts(prm, scene.buffers.T, any(isinstance(c, Texels) for c in chosen.values()),
+                   threads)
+    uniform = {"gPRM": parts.gPRM, "gT": parts.gT}
     for (j, rs), (wx, wy) in zip(batches, outs):  # 2. and 3.
         a = _sample_adjoints(wx, wy, g_qrx)
         seeds = {f"a_ret_value_{c}": a[:, i] for i, c in enumerate("xyz"[:a.shape[1]])}
         if a.shape[1] == 1:
             seeds = {"a_ret_value": a[:, 0]}
-        grad = np.zeros(j.size * prm.size, np.float32)
-        varying = {"ad_row": j * np.int32(prm.size), "ad_row_T": texels.rows(j.size)} | seeds
-        uniform = {"gPRM": grad, "gT": texels.grad}
+        varying = {"ad_row": parts.rows(j.size, prm.size), "ad_row_T":
+                   parts.rows(j.size, scene.buffers.T.size) if parts.texels else
+                   np.zeros(j.size, np.int32)} | seeds
         head = [rs, *scene.buffers.args(), prm]
         rest = [(uniform[x], False) if x in uniform else
                 (varying.get(x, np.zeros(j.size, np.float32)), True)
                 for x in names[names.index("PRM") + 1:]]
-        texels.run(partial(_adjoint_part, mod["render_sample"], j, head, rest), j.size)
-        total += grad.reshape(j.size, prm.size).sum(0, dtype=np.float64)
-    out = {}
-    for name, s in chosen.items():
-        if isinstance(s, Texels):
-            out[name] = texels.gradient(s)
-        else:
-            out[name] = total[s.offset:s.offset + s.size].astype(np.float32)
-    return out
+        parts.run(partial(_adjoint_part, mod["render_sample"], j, head, rest), j.size)
+    return {name: parts.gradient(c) for name, c in chosen.items()}
 
 
 def _sample_adjoints(wx: np.ndarray, wy: np.ndarray, g_qrx: np.ndarray) -> np.ndarray:
@@ -176,58 +172,66 @@ def _sample_adjoints(wx: np.ndarray, wy: np.ndarray, g_qrx: np.ndarray) -> np.nd
     pixel's total weight, per cell as (columns, rows x channels)): (samples, channels).
     Batched matrix products (numpy's einsum of the three took 3x as long)."""
     s, cells, m = wx.shape
-    t = np.matmul(wx.transpose(1, 0, 2), g_qrx)  # (cells, s, rows x channels)
-    t = t.reshape(cells, s, m, -1) * wy.transpose(1, 0, 2)[..., None]
-    return t.sum(2).transpose(1, 0, 2).reshape(s * cells, -1)
+    out = np.empty((s, cells, g_qrx.shape[2] // m), np.float32)
+    for lo in range(0, cells, CELLS_AT_ONCE):  # a few MB of temporaries at a time
+        hi = min(lo + CELLS_AT_ONCE, cells)
+        t = np.matmul(wx[:, lo:hi].transpose(1, 0, 2), g_qrx[lo:hi])  # (cells, s, m x C)
+        t = t.reshape(hi - lo, s, m, -1) * wy[:, lo:hi].transpose(1, 0, 2)[..., None]
+        out[:, lo:hi] = t.sum(2).transpose(1, 0, 2)
+    return out.reshape(s * cells, -1)
 
 
-def _adjoint_part(kernel, j: np.ndarray, head: list, rest: list, lo: int, hi: int,
-                  threads: int | None) -> None:
+def _adjoint_part(kernel, j: np.ndarray, head: list, rest: list, lo: int, hi: int) -> None:
     """The adjoint kernel over samples [lo, hi) of a batch (``rest``: the adjoint's own
     arguments and whether each is varying: those are sliced, the gradient buffers not)."""
-    kernel(j[lo:hi], *head, *[x[lo:hi] if varying else x for x, varying in rest],
-           threads=threads)
+    kernel(j[lo:hi], *head, *[x[lo:hi] if varying else x for x, varying in rest], threads=1)
 
 
-class _TexelGradient:
-    """The gradient buffer ``gT`` of the texels and its rows: without texel parameters one
-    row that nobody reads (the adjoint kernel writes it anyway); with them, ``LANES`` rows per
-    thread, the threads each running a contiguous part of a batch (so no two lanes running
-    at once add into one row), summed at the end."""
+class _Parts:
+    """The adjoint pass split into parts of whole packets, ``PARTS_PER_THREAD`` per thread
+    (so a slow thread holds up little), each with ``LANES`` rows of its own in each gradient
+    buffer: lane k of a packet adds into row k of its part, so no two lanes running at once
+    add into one element (no atomics), and the buffers stay small (parts x LANES rows, not
+    one per sample).  Without texel parameters ``gT`` is one row nobody reads (the adjoint
+    kernel writes it anyway)."""
 
-    def __init__(self, T: np.ndarray, wanted: bool, threads: int | None) -> None:
-        self.size = T.size
-        self.parts = max(1, int(threads or os.cpu_count() or 1)) if wanted else 1
-        rows = self.parts * LANES if wanted else 1
-        if rows * self.size >= 2 ** 31:
-            raise ValueError(f"texel gradients of {self.size} floats in {rows} rows exceed "
+    def __init__(self, prm: np.ndarray, T: np.ndarray, texels: bool,
+                 threads: int | None) -> None:
+        self.threads = max(1, int(threads or os.cpu_count() or 1))
+        self.parts = 1 if self.threads == 1 else self.threads * PARTS_PER_THREAD
+        rows = self.parts * LANES
+        if rows * max(T.size if texels else 0, prm.size) >= 2 ** 31:
+            raise ValueError(f"texel gradients of {T.size} floats in {rows} rows exceed "
                              "32-bit indices; use fewer threads")
-        self.wanted, self.threads = wanted, threads
-        self.grad = np.zeros(rows * self.size, np.float32)
+        self.texels = texels
+        self.gPRM = np.zeros(rows * prm.size, np.float32)
+        self.gT = np.zeros(rows * T.size if texels else T.size, np.float32)
 
     def _bounds(self, n: int) -> list[tuple[int, int]]:
         per = -(-n // self.parts)  # ceil: parts of whole packets
         step = -(-per // LANES) * LANES
         return [(lo, min(lo + step, n)) for lo in range(0, n, step)]
 
-    def rows(self, n: int) -> np.ndarray:
-        if not self.wanted:
-            return np.zeros(n, np.int32)
+    def rows(self, n: int, size: int) -> np.ndarray:
+        """The first element of each sample's row, in a buffer of rows of ``size``."""
         rows = np.empty(n, np.int32)
         for p, (lo, hi) in enumerate(self._bounds(n)):
-            rows[lo:hi] = (p * LANES + np.arange(hi - lo) % LANES) * self.size
+            rows[lo:hi] = (p * LANES + np.arange(hi - lo) % LANES) * size
         return rows
 
     def run(self, call, n: int) -> None:
-        """``call(lo, hi, threads)`` over [0, n): at once, or part by part on threads."""
-        if not self.wanted or self.parts == 1:
-            call(0, n, self.threads if not self.wanted else 1)
+        """``call(lo, hi)`` over the parts of [0, n), on ``threads`` threads."""
+        if self.parts == 1:
+            call(0, n)
             return
-        with ThreadPoolExecutor(self.parts) as pool:
-            for f in [pool.submit(call, lo, hi, 1) for lo, hi in self._bounds(n)]:
+        with ThreadPoolExecutor(self.threads) as pool:
+            for f in [pool.submit(call, lo, hi) for lo, hi in self._bounds(n)]:
                 f.result()
 
-    def gradient(self, texels: Texels) -> np.ndarray:
-        total = self.grad.reshape(-1, self.size).sum(0, dtype=np.float64)
-        g = sum(total[off:off + texels.size] / scale for off, scale in texels.copies)
-        return np.asarray(g, np.float32).reshape(texels.shape)
+    def gradient(self, chosen: Slot | Texels) -> np.ndarray:
+        if isinstance(chosen, Texels):
+            total = self.gT.reshape(self.parts * LANES, -1).sum(0, dtype=np.float64)
+            g = sum(total[off:off + chosen.size] / scale for off, scale in chosen.copies)
+            return np.asarray(g, np.float32).reshape(chosen.shape)
+        total = self.gPRM.reshape(self.parts * LANES, -1).sum(0, dtype=np.float64)
+        return total[chosen.offset:chosen.offset + chosen.size].astype(np.float32)
