@@ -31,7 +31,7 @@ import numpy as np
 from ...compiler.diagnostics import CompileError
 from ...core.scene_spec import Slot
 from .differentiable import Texels, _lookup, ad_twin
-from .film import film_reach, film_uniforms
+from .film import film_reach, film_uniforms, sample_weights
 
 if TYPE_CHECKING:
     from .renderer import Scene
@@ -80,15 +80,6 @@ def _taps(film: dict, n: int) -> tuple[np.ndarray, np.ndarray]:
     return pix, ok
 
 
-def _weights(out: dict, n: int, cells: int) -> tuple[np.ndarray, np.ndarray]:
-    """The samples' column and row filter weights, (samples per cell, cells, 2n+1) each
-    (a batch is sample-major: sample j is in cell j % cells)."""
-    m = 2 * n + 1
-    wx = np.stack([np.asarray(out[f"w{k}"], np.float32) for k in range(m)], -1)
-    wy = np.stack([np.asarray(out[f"w{m + k}"], np.float32) for k in range(m)], -1)
-    return wx.reshape(-1, cells, m), wy.reshape(-1, cells, m)
-
-
 LANES = 16  # the widest SIMD packet: lanes of one packet add gradients into rows of their
 # own (array position mod LANES), each part of the adjoint pass into LANES rows (_Parts)
 PARTS_PER_THREAD = 4
@@ -134,18 +125,21 @@ def backward(scene: Scene, d_img: Any, params: list[str], spp: int | None = None
         len(kept[1]) == len(batches) else None
     scene.film_weights = None  # used once: its memory is free again
     for b, (j, rs) in enumerate(batches):  # 1. the film's total weight per pixel
-        out = kept[b] if kept is not None else \
-            plain["render_sample"](j, rs, *scene.buffers.args(), prm, threads=threads)
-        wx, wy = _weights(out, n, cells)
+        if kept is not None:
+            wx, wy = kept[b]
+        else:
+            out = plain["render_sample"](j, rs, *scene.buffers.args(), prm, threads=threads)
+            wx, wy = sample_weights(out, n, cells)
         outs.append((wx, wy))
         # sum over the samples of wy wx^T, per cell: a batched matrix product
         per_tap += np.matmul(wy.transpose(1, 2, 0), wx.transpose(1, 0, 2))
     h, w = film["crop_h"], film["crop_w"]
     weights = np.bincount(pix[ok], per_tap[ok], h * w).reshape(h, w)
     g = d / np.where(weights == 0, 1.0, weights)[..., None]
-    g_taps = np.where(ok[..., None], g.reshape(h * w, -1)[pix], 0.0)  # (cells, r, q, C)
-    m, c = g_taps.shape[1], g_taps.shape[3]
-    g_qrx = np.ascontiguousarray(g_taps.transpose(0, 2, 1, 3), np.float32).reshape(-1, m, m * c)
+    # per cell, the taps' g as (columns, rows x channels), 0 outside the crop
+    g_qrx = g.astype(np.float32).reshape(h * w, -1)[pix.transpose(0, 2, 1)]
+    g_qrx *= ok.transpose(0, 2, 1)[..., None]
+    g_qrx = g_qrx.reshape(len(pix), pix.shape[2], -1)
     kernel = next(k for k in mod.manifest["kernels"] if k["name"] == "render_sample")
     names = [p["name"] for p in kernel["params"]]
     parts = _Parts(prm, scene.buffers.T, any(isinstance(c, Texels) for c in chosen.values()),

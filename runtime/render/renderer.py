@@ -45,7 +45,7 @@ from .declared import declared_instance
 from .differentiable import SceneParams, gradient, render_forward
 from .emitters import KINDS as EMITTER_KINDS
 from .emitters import EmitterTables, emitter_tables
-from .film import develop, film_uniforms, new_accumulator
+from .film import develop, film_reach, film_uniforms, new_accumulator, sample_weights
 from .integrators import integrator_instances, integrator_plan
 from .kernel_source import kernel_source, scene_plugins
 from .progress import Progress
@@ -506,7 +506,7 @@ class Scene:
                                  acc, threads=threads)
                 self.nonfinite += int(np.count_nonzero(prev["bad"]))
                 if keep is not None:
-                    keep.append({c: np.array(v) for c, v in prev.items() if c[0] == "w"})
+                    keep.append(sample_weights(prev, film_reach(film), cells))
                 bar.update(done)
             waiting = None
             if job is not None:
