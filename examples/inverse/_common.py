@@ -9,6 +9,7 @@ before/target/after images and the loss curve.
 
 from __future__ import annotations
 
+import argparse
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -88,3 +89,14 @@ def save(out: Path, prefix: str, images: dict[str, np.ndarray], losses: list[flo
     fig.savefig(out / f"{prefix}_loss.png", dpi=120)
     plt.close(fig)
     log(f"wrote {out}/{prefix}_*.png")
+
+
+def arguments(doc: str, **defaults: float) -> argparse.Namespace:
+    """The command line of an example: ``--NAME`` for each default (its type from the
+    default's), and ``--out`` (out/inverse)."""
+    ap = argparse.ArgumentParser(description=doc.splitlines()[0])
+    for name, value in defaults.items():
+        ap.add_argument(f"--{name}", type=type(value), default=value)
+    ap.add_argument("--out", default=str(Path(__file__).resolve().parents[2] / "out" /
+                                         "inverse"))
+    return ap.parse_args()

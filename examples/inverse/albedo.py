@@ -12,7 +12,6 @@ matplotlib, the loss curve albedo_loss.png.
 
 from __future__ import annotations
 
-import argparse
 import sys
 from pathlib import Path
 
@@ -20,7 +19,7 @@ import numpy as np
 import rdsl
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _common import descend, save  # examples/inverse/_common.py
+from _common import arguments, descend, save  # examples/inverse/_common.py
 
 ROOT = Path(__file__).resolve().parents[2]
 SCENE = ROOT / "examples" / "cbox" / "cbox.xml"
@@ -49,13 +48,7 @@ def recover(res: int = 48, spp: int = 32, iterations: int = 80, lr: float = 0.03
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--iterations", type=int, default=80)
-    ap.add_argument("--res", type=int, default=48)
-    ap.add_argument("--spp", type=int, default=32)
-    ap.add_argument("--lr", type=float, default=0.03)
-    ap.add_argument("--out", default=str(ROOT / "out" / "inverse"))
-    args = ap.parse_args()
+    args = arguments(__doc__, iterations=80, res=48, spp=32, lr=0.03)
     recover(args.res, args.spp, args.iterations, args.lr, out=Path(args.out))
 
 

@@ -12,7 +12,6 @@ out/inverse/radiance_{before,target,after}.png and the loss curve radiance_loss.
 
 from __future__ import annotations
 
-import argparse
 import sys
 from pathlib import Path
 
@@ -20,7 +19,7 @@ import numpy as np
 import rdsl
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _common import descend, save  # examples/inverse/_common.py
+from _common import arguments, descend, save  # examples/inverse/_common.py
 
 ROOT = Path(__file__).resolve().parents[2]
 SCENE = ROOT / "examples" / "cbox" / "cbox.xml"
@@ -51,13 +50,7 @@ def recover(res: int = 48, spp: int = 16, iterations: int = 80, lr: float = 1.0,
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--iterations", type=int, default=80)
-    ap.add_argument("--res", type=int, default=48)
-    ap.add_argument("--spp", type=int, default=16)
-    ap.add_argument("--lr", type=float, default=1.0)
-    ap.add_argument("--out", default=str(ROOT / "out" / "inverse"))
-    args = ap.parse_args()
+    args = arguments(__doc__, iterations=80, res=48, spp=16, lr=1.0)
     recover(args.res, args.spp, args.iterations, args.lr, out=Path(args.out))
 
 

@@ -15,7 +15,6 @@ writes out/inverse/texture_{before,target,after}.png, the recovered and true tex
 
 from __future__ import annotations
 
-import argparse
 import re
 import sys
 from pathlib import Path
@@ -25,7 +24,7 @@ import rdsl
 from rdsl.runtime.render.image import write_exr
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _common import descend, save  # examples/inverse/_common.py
+from _common import arguments, descend, save  # examples/inverse/_common.py
 
 ROOT = Path(__file__).resolve().parents[2]
 CBOX = ROOT / "examples" / "cbox" / "cbox.xml"
@@ -102,13 +101,7 @@ def recover(res: int = 128, spp: int = 4, iterations: int = 80, lr: float = 0.05
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--iterations", type=int, default=80)
-    ap.add_argument("--res", type=int, default=128)
-    ap.add_argument("--spp", type=int, default=4)
-    ap.add_argument("--lr", type=float, default=0.05)
-    ap.add_argument("--out", default=str(ROOT / "out" / "inverse"))
-    args = ap.parse_args()
+    args = arguments(__doc__, iterations=80, res=128, spp=4, lr=0.05)
     recover(args.res, args.spp, args.iterations, args.lr, out=Path(args.out))
 
 

@@ -11,8 +11,9 @@ Per batch of samples:
 2. each sample's adjoint is then sum over the pixels it reaches of w * d_img / total
    weight, computed here (it only moves numbers between the image and the samples);
 3. the adjoint kernel recomputes the sample and sweeps it backwards, adding the gradient of
-   ``PRM`` into a row of ``gPRM`` of its own per sample (``ad_row``): no two lanes or threads
-   write one element, and the rows are summed at the end.
+   ``PRM`` into a row of ``gPRM`` (``ad_row``) and that of the texels ``T`` into a row of
+   ``gT`` (``ad_row_T``) of the sample's lane (:class:`_Parts`): no two lanes running at
+   once write one element, and the rows are summed at the end.
 
 The estimate is that of the same Monte Carlo render (same seed and spp), as
 ``render_forward``'s: the dot product of ``backward``'s gradient with a tangent equals that
