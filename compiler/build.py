@@ -25,22 +25,43 @@ class Build:
     model: ColorModel
     # automatic differentiation: None, "forward" or "reverse" (compiler/passes/ad_*.py)
     ad: str | None = None
+    # reverse mode: the `eliminate` pass's threshold (0: not run; passes/eliminate.py)
+    eliminate: int = 0
 
     @classmethod
     def of(cls, target: str | Target = "host", variant: str | ColorModel = "rgb",
-           width: int | None = None, ad: str | None = None) -> Build:
+           width: int | None = None, ad: str | None = None,
+           eliminate: bool | int = False) -> Build:
         """The build for a target name (``host`` resolves to this machine's widest) and a
         variant name; a name that is neither raises a diagnostic listing the valid ones.
         ``width`` picks the SIMD width of target ``c`` (see :func:`get_target`); ``ad`` the
-        differentiation mode (None, "forward" or "reverse": docs/ad.md)."""
+        differentiation mode (None, "forward" or "reverse": docs/ad.md); ``eliminate``
+        (reverse mode) runs graph elimination, True at the default threshold (10) or an
+        int threshold (0: off)."""
         if ad not in AD_MODES:
             raise CompileError(f"unknown differentiation mode `{ad}` (valid: forward, reverse)")
-        return cls(get_target(target, width), color_model(variant), ad)
+        return cls(get_target(target, width), color_model(variant), ad,
+                   elimination_threshold(ad, eliminate))
 
     @property
     def width(self) -> int:
         """SIMD lanes per kernel call."""
         return self.target.width
+
+
+def elimination_threshold(ad: str | None, eliminate: bool | int) -> int:
+    """The threshold of the ``eliminate`` pass a build asks for (0: none)."""
+    if eliminate is True:
+        eliminate = 10
+    if isinstance(eliminate, bool) or not eliminate:
+        return 0
+    if not isinstance(eliminate, int) or eliminate < 0:
+        raise CompileError(f"the elimination threshold must be a non-negative integer, "
+                           f"not `{eliminate}`")
+    if ad != "reverse":
+        raise CompileError("graph elimination (`eliminate`) needs a reverse build "
+                           "(ad=\"reverse\")")
+    return eliminate
 
 
 def color_model(variant: str | ColorModel) -> ColorModel:

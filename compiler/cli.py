@@ -21,6 +21,9 @@ _VARIANTS_HELP = ", ".join(VARIANTS) + " (default: rgb)"
 _AD_HELP = ("differentiate: 'forward' gives each kernel with Float arguments a tangent "
             "argument per argument and a tangent result per Float result; 'reverse' an adjoint "
             "argument per Float result and a gradient result per Float argument (docs/ad.md)")
+_ELIM_HELP = ("reverse mode: run graph elimination (the `eliminate` pass) with this "
+              "threshold on d_in*d_out (bare flag: 10; 0: off); implied by "
+              "--print-after eliminate (docs/ad.md)")
 _ARCH_HELP = "GPU architecture of target ptx: sm_70 (default), sm_80 or sm_90"
 _WIDTH_HELP = ("SIMD width of target c, or the lanes per work-item of target opencl: 1, 4, "
                "8 or 16 (default: the host's widest); the LLVM targets have their own")
@@ -41,6 +44,8 @@ def add_commands(sub: argparse._SubParsersAction) -> dict[str, Command]:
                         "'all' for every pass); default: the final IR")
     i.add_argument("--no-locs", action="store_true", help="omit source locations")
     i.add_argument("--ad", choices=["forward", "reverse"], default=None, help=_AD_HELP)
+    i.add_argument("--eliminate", type=int, nargs="?", const=10, default=None,
+                   metavar="THRESHOLD", help=_ELIM_HELP)
 
     k = sub.add_parser("compile", help="compile to a shared library, C header and manifest")
     k.add_argument("file")
@@ -83,7 +88,12 @@ def _ir(args: argparse.Namespace) -> int:
     from .passes import pass_names
     from .printer import print_module
 
-    build = Build.of(args.target, args.variant, args.width, args.ad)
+    elim = args.eliminate
+    if args.print_after == "eliminate" and args.ad != "reverse":
+        raise CompileError("`eliminate` runs in a reverse build: add --ad reverse")
+    if elim is None and args.print_after == "eliminate":
+        elim = 10
+    build = Build.of(args.target, args.variant, args.width, args.ad, elim or 0)
     names = pass_names() + ["lower", "all"]
     if args.print_after is not None and args.print_after not in names:
         raise CompileError(f"unknown pass `{args.print_after}` (expected one of: "

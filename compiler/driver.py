@@ -21,6 +21,7 @@ from .ir import Module
 from .passes import Pass
 from .passes.ad_forward import AdForward
 from .passes.ad_reverse import AdReverse
+from .passes.eliminate import Eliminate
 from .passes.evaluate import Evaluate, evaluable
 from .passes.inline import Inline
 from .passes.lift import Lift
@@ -52,6 +53,8 @@ def pipeline(build: Build, scene: SceneSpec | None = None,
         Optimize(),  # forward extracts, CSE the leaves
         # tangents (forward mode), adjoints (reverse), or derivative() = 0 without AD
         AdReverse() if build.ad == "reverse" else AdForward(build.ad),
+        # reverse mode, if asked: the sweeps read eliminated edge weights, not primal values
+        *([Eliminate(build.eliminate)] if build.eliminate else []),
         Vectorize(build.width),  # SPMD over lanes with masks
         Optimize(),  # CSE broadcasts and masks
     ]

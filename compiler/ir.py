@@ -28,7 +28,8 @@ from __future__ import annotations
 
 import enum
 import itertools
-from collections.abc import Iterator
+import weakref
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -361,16 +362,38 @@ PURE_OPS = set(Op) - SIDE_EFFECT_OPS - {Op.IF, Op.LOOP, Op.LOAD, Op.GATHER, Op.I
 _ids = itertools.count(1)
 
 
-class Value:
-    """An SSA value.  ``name`` is a hint for printing (and the ABI name of a kernel param)."""
+def _nobody() -> None:  # the owner of a value that has none
+    return None
 
-    __slots__ = ("id", "name", "owner", "type")
+
+class Value:
+    """An SSA value.  ``name`` is a hint for printing (and the ABI name of a kernel param).
+    ``owner`` (its instruction, or the block whose argument it is) is a weak reference: with
+    no cycles in the IR a compile's ~800k objects are freed as it goes, not by the cycle
+    collector (18% of a compile)."""
+
+    __slots__ = ("_owner", "id", "name", "type")
 
     def __init__(self, type: Type, name: str | None = None) -> None:
         self.id = next(_ids)
         self.type = type
         self.name = name
-        self.owner: Instr | Block | None = None
+        self._owner: Callable[[], Instr | Block | None] = _nobody
+
+    @property
+    def owner(self) -> Instr | Block | None:
+        return self._owner()
+
+    @owner.setter
+    def owner(self, owner: Instr | Block | None) -> None:
+        self._owner = _nobody if owner is None else weakref.ref(owner)
+
+    def __getstate__(self) -> tuple[Any, ...]:  # copy/pickle hold the owner strongly
+        return self.id, self.name, self.type, self.owner
+
+    def __setstate__(self, state: tuple[Any, ...]) -> None:
+        self.id, self.name, self.type, owner = state
+        self.owner = owner
 
     def __repr__(self) -> str:
         return f"<%{self.name or self.id}: {self.type}>"
@@ -379,7 +402,7 @@ class Value:
 class Instr:
     """One instruction: op, operands, results, attributes, nested regions and a location."""
 
-    __slots__ = ("attrs", "loc", "op", "operands", "regions", "results")
+    __slots__ = ("__weakref__", "attrs", "loc", "op", "operands", "regions", "results")
 
     def __init__(
         self,
@@ -415,7 +438,7 @@ class Instr:
 class Block:
     """A region's single block: arguments, then instructions ending in a terminator."""
 
-    __slots__ = ("args", "instrs")
+    __slots__ = ("__weakref__", "args", "instrs")
 
     def __init__(self, args: list[Value] | None = None) -> None:
         self.args = list(args or [])

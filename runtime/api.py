@@ -225,6 +225,8 @@ def _key(source_or_path: str | os.PathLike, build: Build, options: dict[str, Any
     keyed = {k: v for k, v in options.items() if k not in ("filename", "search_paths")}
     if quick:  # the full tier's key is the one it always had
         keyed["quick"] = True
+    if build.target.backend == "c" and os.environ.get("RDSL_CFLAGS"):  # cc's extra flags
+        keyed["cflags"] = os.environ["RDSL_CFLAGS"]
     return cache_key(text, files, build, keyed), files
 
 

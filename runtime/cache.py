@@ -42,6 +42,8 @@ def cache_key(source_text: str, files: Iterable[os.PathLike | str], build: Build
     part("width", str(build.width))
     if build.ad is not None:  # keys of builds without AD stay as they were
         part("ad", build.ad)
+    if getattr(build, "eliminate", 0):
+        part("eliminate", str(build.eliminate))
     part("options", json.dumps(options, sort_keys=True, default=repr))
     part("source", source_text)
     for f in files:

@@ -74,6 +74,7 @@ _SIGNATURES: dict[str, tuple[Any, list[Any]]] = {
     "rtcSetGeometryBuildQuality": (None, [_P, ctypes.c_int]),
     "rtcCommitGeometry": (None, [_P]),
     "rtcAttachGeometry": (ctypes.c_uint, [_P, _P]),
+    "rtcAttachGeometryByID": (None, [_P, _P, ctypes.c_uint]),
     "rtcReleaseGeometry": (None, [_P]),
     # rtcIntersect1(scene, rayhit, args); rtcIntersectN(valid, scene, rayhit, args)
     **{f"rtc{q}1": (None, [_P, _P, _P]) for q in QUERIES},
@@ -225,7 +226,8 @@ def _aligned_words(n_words: int, align: int) -> np.ndarray:
 
 
 class EmbreeScene:
-    """A committed Embree scene of triangle meshes; mesh i has geometry ID i.
+    """A committed Embree scene of triangle meshes; mesh i has geometry ID i (an instance of
+    runtime/embree_instance.py takes one ID per mesh of its group).
 
     ``meshes`` is a sequence of ``(vertices, faces)``: vertices (N, 3) real numbers (stored as
     float32), faces (M, 3) integer indices into the vertices. ``quality`` is the scene's BVH
@@ -260,15 +262,16 @@ class EmbreeScene:
         self.handle = scene
         lib.rtcSetSceneBuildQuality(scene, BUILD_QUALITY[quality])
         lib.rtcSetSceneFlags(scene, SCENE_FLAGS["robust"] if robust else 0)
+        geom_id = 0  # an instance (runtime/embree_instance.py) takes one ID per group mesh
         for i, item in enumerate(checked):
-            if hasattr(item, "new_geometry"):  # a user geometry, committed by its owner
+            if hasattr(item, "new_geometry"):  # a user geometry or an instance, committed
                 geom = item.new_geometry(self.device, f"meshes[{i}]")
                 try:
-                    geom_id = lib.rtcAttachGeometry(scene, geom)
+                    lib.rtcAttachGeometryByID(scene, geom, geom_id)
                     self.device.check(f"attaching meshes[{i}]")
-                    assert geom_id == i, (geom_id, i)
                 finally:
                     lib.rtcReleaseGeometry(geom)
+                geom_id += getattr(item, "slots", 1)
                 continue
             v, f = item
             geom = lib.rtcNewGeometry(self.device.handle, _GEOMETRY_TYPE_TRIANGLE)
@@ -283,11 +286,11 @@ class EmbreeScene:
                 ctypes.memmove(ib, f.ctypes.data, f.nbytes)
                 lib.rtcSetGeometryBuildQuality(geom, BUILD_QUALITY[mesh_quality])
                 lib.rtcCommitGeometry(geom)
-                geom_id = lib.rtcAttachGeometry(scene, geom)
+                lib.rtcAttachGeometryByID(scene, geom, geom_id)
                 self.device.check(f"attaching meshes[{i}]")
-                assert geom_id == i, (geom_id, i)
             finally:
                 lib.rtcReleaseGeometry(geom)  # the scene holds its own reference
+            geom_id += 1
         lib.rtcCommitScene(scene)
         self.device.check("rtcCommitScene")
 

@@ -32,6 +32,10 @@ _NAMES = {"f32": "float32", "i32": "int32", "u32": "uint32", "u64": "uint64", "b
 MIN_CHUNK = 4096  # elements per thread-pool task, at least
 CHUNKS_PER_THREAD = 16
 
+# fields a Python caller may leave out of a struct argument, with the value they then take
+# in every lane: a Surface made away from a mesh (stdlib/types.rdsl) is on no triangle
+OPTIONAL_FIELDS: dict[str, dict[str, Any]] = {"Surface": {"prim": -1, "bary": (0.0, 0.0)}}
+
 
 def _shape_desc(tj: dict[str, Any]) -> str:
     kind = tj["kind"]
@@ -181,10 +185,12 @@ class Kernel:
             if extra:
                 raise self._err(f"parameter `{path}` has no field `{sorted(extra)[0]}` "
                                 f"(fields: {', '.join(names)})")
+            optional = OPTIONAL_FIELDS.get(tj.get("name"), {})
             for fname, ft in tj["fields"]:
-                if fname not in value:
+                if fname not in value and fname not in optional:
                     raise self._err(f"parameter `{path}` is missing field `{fname}`")
-                self._flatten_varying(f"{path}.{fname}", value[fname], ft, out)
+                self._flatten_varying(f"{path}.{fname}", value.get(fname, optional.get(fname)),
+                                      ft, out)
         elif kind == "tuple":
             elems = tj["elems"]
             if not isinstance(value, (list, tuple)) or len(value) != len(elems):

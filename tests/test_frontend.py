@@ -81,7 +81,8 @@ def test_simple_function_contract() -> None:
     assert "export" not in m.functions["pi"].attrs
     assert {"Surface", "Ray", "BsdfSample", "EmitterSample", "Complex", "Frame"} <= set(m.structs)
     surf = m.structs["Surface"]
-    assert [n for n, _ in surf.fields] == ["p", "n", "sh_n", "uv", "wi", "t", "valid"]
+    assert [n for n, _ in surf.fields] == ["p", "n", "sh_n", "uv", "wi", "t", "valid", "prim",
+                                           "bary"]
 
 
 def test_overloads_are_mangled() -> None:

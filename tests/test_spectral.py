@@ -108,7 +108,8 @@ import emitter.area;
 fn k(l0: Float, l1: Float, l2: Float, l3: Float, T: [Float]) -> Spectrum {
     set_wavelengths(Spectrum(l0, l1, l2, l3));
     let s = Surface { p: Vec3(0.0), n: Vec3(0.0, 0.0, 1.0), sh_n: Vec3(0.0, 0.0, 1.0),
-                      uv: Vec2(0.0, 0.0), wi: Vec3(0.0, 0.0, 1.0), t: 1.0, valid: true };
+                      uv: Vec2(0.0, 0.0), wi: Vec3(0.0, 0.0, 1.0), t: 1.0, valid: true,
+                      prim: -1, bary: Vec2(0.0) };
     return scene_emitter_eval(0, s, T);
 }
 """

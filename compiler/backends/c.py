@@ -48,6 +48,7 @@ class SimdC(CLikePrinter):
     """The C-like printer with varying values as vector-extension types of ``width``."""
 
     target_name: ClassVar[str] = "c"
+    float_minmax: ClassVar[bool] = True  # f32 min/max through the prelude's RDSL_MINF/MAXF
 
     def __init__(self, width: int, *args, **kwargs) -> None:
         super().__init__(*args, **kwargs)
@@ -93,6 +94,13 @@ class SimdC(CLikePrinter):
     def select_cmp(self, t: ir.ScalarType, cond: str, a: str, b: str) -> str:
         return super().select_cmp(t, cond, a, b) if t.lanes == 1 else \
             self.select_raw(t, cond, a, b)
+
+    def render_minmax(self, ins: ir.Instr) -> str:
+        t = ins.type
+        if t.lanes == 1 or t.name != "f32" or not self.float_minmax:
+            return super().render_minmax(ins)
+        a, b = self.operands(ins)  # x86's minps/maxps are select(a < b, a, b), exactly
+        return f"RDSL_{'MIN' if ins.op is ir.Op.MIN else 'MAX'}F({a}, {b})"
 
     def render_cmp(self, ins: ir.Instr) -> str:
         r = super().render_cmp(ins)
@@ -220,22 +228,46 @@ class SimdC(CLikePrinter):
         buf, idx, mask = ins.operands
         e = buf.type.elem.name  # type: ignore[attr-defined]
         r = self.declare(ins.result, None)
+        macro = self.gather_macro(e, idx, mask)
+        if macro:  # the hardware gather (c_entry.prelude), or its lane loop
+            self.line(f"{macro}({self.ctype(ins.type)}, {r}, {self.v(buf)}, {self.v(idx)}, "
+                      f"{self.v(mask)});")
+            return None
         loaded = self.mem_to_value(e, f"{self.v(buf)}[{self.lane(idx)}]", 2)
         self.line(f"for (int k = 0; k < {self.W}; ++k) "
                   f"if ({self.lane(mask)}) {self.lane_ref(r, ins.type)} = {loaded};")
         return None
+
+    def gather_macro(self, e: str, idx: ir.Value, mask: ir.Value) -> str | None:
+        """The prelude's macro for a gather of 4-byte elements (buffer type ``e``) at
+        varying i32 indices under a varying mask (``RDSL_GATHER32``: one instruction where
+        the compiler targets AVX2 or AVX-512, else a lane loop), or None (the loop here)."""
+        return "RDSL_GATHER32" if _lanes_of_32_bits(e, idx, mask) else None
 
     def render_scatter(self, ins: ir.Instr) -> None:
         buf, idx, val, mask = ins.operands
         if mask.type.lanes == 1:
             return super().render_scatter(ins)
         e = buf.type.elem.name  # type: ignore[attr-defined]
+        if self.gather_macro(e, idx, mask) and val.type.lanes > 1:  # type: ignore[attr-defined]
+            # the scatter of the same lanes (AVX-512: lanes in order, the last one wins)
+            self.line(f"RDSL_SCATTER32({self.v(buf)}, {self.v(idx)}, {self.v(val)}, "
+                      f"{self.v(mask)});")
+            return None
         v = self.lane(val)
         if e == "bool":
             v = f"(uint8_t)({v} != 0)"
         self.line(f"for (int k = 0; k < {self.W}; ++k) "
                   f"if ({self.lane(mask)}) {self.v(buf)}[{self.lane(idx)}] = {v};")
         return None
+
+
+def _lanes_of_32_bits(e: str, idx: ir.Value, mask: ir.Value) -> bool:
+    """Whether a gather or scatter reaches 4-byte elements at varying i32 indices under a
+    varying mask (what one x86 gather or scatter instruction does)."""
+    t, m = idx.type, mask.type
+    assert isinstance(t, ir.ScalarType) and isinstance(m, ir.ScalarType)
+    return e in ("f32", "i32", "u32") and t.name == "i32" and t.lanes > 1 and m.lanes > 1
 
 
 # --------------------------------------------------------------------------------------

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import json
 import os
+import shlex
 from pathlib import Path
 
 from .. import ir
@@ -20,8 +21,15 @@ from .clib import _cc, header, manifest, run_cc, writable_dir
 CFLAGS = ("-std=c11", "-O2", "-march=native", "-ffp-contract=off", "-fPIC")
 
 
-def compile_shared(c_path: Path, so_path: Path, flags: tuple[str, ...] = CFLAGS) -> None:
-    """``cc FLAGS -shared c_path -lm -o so_path``."""
+def cflags() -> tuple[str, ...]:
+    """:data:`CFLAGS` and then the words of ``$RDSL_CFLAGS`` (``RDSL_CFLAGS=-O3``: a later
+    ``-O``/``-march`` wins; the kernel cache keys them, rdsl.runtime.api)."""
+    return CFLAGS + tuple(shlex.split(os.environ.get("RDSL_CFLAGS", "")))
+
+
+def compile_shared(c_path: Path, so_path: Path, flags: tuple[str, ...] | None = None) -> None:
+    """``cc FLAGS -shared c_path -lm -o so_path`` (``flags``: default :func:`cflags`)."""
+    flags = cflags() if flags is None else flags
     cc = _cc()
     run_cc(cc, [*flags, "-shared", str(c_path), "-lm"], so_path,
            f"compiling {c_path.name} with `{cc} {' '.join(flags)}`")
@@ -44,7 +52,7 @@ def build_c_library(module: ir.Module, target: Target, out_dir: str | os.PathLik
             raise CompileError(f"cannot write `{p}`: it exists and is not a regular file")
     source = emit_c(module, stem)
     man = manifest(module, target)
-    man["cflags"] = list(CFLAGS)
+    man["cflags"] = list(cflags())
     try:
         paths["c"].write_text(source)
         paths["header"].write_text(header(module, target, stem))

@@ -25,6 +25,30 @@ _INTRINSICS = {  # W -> (guard, sqrt, floor, ceil, any) on x86
          "_mm512_test_epi32_mask((__m512i)(m), (__m512i)(m)) != 0", "__m512"),
 }
 
+_MINMAX = {  # W -> (guard, min, max): minps(a, b) is a < b ? a : b, maxps a > b ? a : b
+    4: ("defined(__SSE__)", "_mm_min_ps", "_mm_max_ps", "__m128"),
+    8: ("defined(__AVX__)", "_mm256_min_ps", "_mm256_max_ps", "__m256"),
+    16: ("defined(__AVX512F__)", "_mm512_min_ps", "_mm512_max_ps", "__m512"),
+}
+_GATHER = {  # W -> (guard, the gather of 32-bit lanes) on x86
+    4: ("defined(__AVX2__)", ("_mm_mask_i32gather_epi32(_mm_setzero_si128(), "
+                              "(const int*)(base), (__m128i)(idx), (__m128i)(m), 4)")),
+    8: ("defined(__AVX2__)", ("_mm256_mask_i32gather_epi32(_mm256_setzero_si256(), "
+                              "(const int*)(base), (__m256i)(idx), (__m256i)(m), 4)")),
+    16: ("defined(__AVX512F__)", ("_mm512_mask_i32gather_epi32(_mm512_setzero_si512(), "
+                                  "_mm512_test_epi32_mask((__m512i)(m), (__m512i)(m)), "
+                                  "(__m512i)(idx), (const void*)(base), 4)")),
+}
+
+_SCATTER = {  # W -> (guard, the scatter of 32-bit lanes) on x86: AVX-512 only
+    W: (guard, (f"{pre}_mask_i32scatter_epi32((void*)(base), {pre}_{test}_mask("
+                f"(__m{b}i)(m), (__m{b}i)(m)), (__m{b}i)(idx), (__m{b}i)(v), 4)"))
+    for W, guard, pre, test, b in (
+        (4, "defined(__AVX512F__) && defined(__AVX512VL__)", "_mm", "test_epi32", 128),
+        (8, "defined(__AVX512F__) && defined(__AVX512VL__)", "_mm256", "test_epi32", 256),
+        (16, "defined(__AVX512F__)", "_mm512", "test_epi32", 512))
+}
+
 
 def prelude(width: int, stem: str) -> list[str]:
     """Includes, the vector types of ``width`` and the macros the bodies use."""
@@ -63,7 +87,7 @@ def prelude(width: int, stem: str) -> list[str]:
             f"#define RDSL_FLOOR(r, a) do {{ {loop} (r)[k_] = floorf((a)[k_]); }} while (0)",
             f"#define RDSL_CEIL(r, a) do {{ {loop} (r)[k_] = ceilf((a)[k_]); }} while (0)",
             f"#define RDSL_ANY(r, m) do {{ (r) = 0; {loop} (r) |= (m)[k_] != 0; }} while (0)",
-            "#endif", "",
+            "#endif", "", *_minmax_gather_scatter(W, loop),
             "/* W elements from base + i * stride on: one load when contiguous and full */",
             "#define RDSL_LOAD(VT, ET, v, base, stride, i, nl) do { \\",
             f"    if ((nl) == {W} && (stride) == (int64_t)sizeof(ET)) \\",
@@ -88,6 +112,43 @@ def prelude(width: int, stem: str) -> list[str]:
             "        ((uint8_t*)(base))[((i) + k_) * (stride)] = (v)[k_] != 0; \\",
             "} while (0)", ""]
     return out
+
+
+def _minmax_gather_scatter(W: int, loop: str) -> list[str]:
+    """The prelude's macros of f32 min/max, gathers and scatters at width ``W``: x86
+    intrinsics where the compiler targets them, portable vector code elsewhere."""
+    mguard, vmin, vmax, mt = _MINMAX[W]
+    return [
+        "/* f32 min(a, b) = a < b ? a : b and max(a, b) = a > b ? a : b, NaNs and signed",
+        " * zeros included: what minps/maxps compute */",
+        f"#if (defined(__x86_64__) || defined(__i386__)) && {mguard}",
+        "#include <immintrin.h>",
+        f"#define RDSL_MINF(a, b) ((rdsl_f32v){vmin}(({mt})(a), ({mt})(b)))",
+        f"#define RDSL_MAXF(a, b) ((rdsl_f32v){vmax}(({mt})(a), ({mt})(b)))",
+        "#else",
+        "#define RDSL_MINF(a, b) RDSL_SELECTF((a) < (b), a, b)",
+        "#define RDSL_MAXF(a, b) RDSL_SELECTF((a) > (b), a, b)",
+        "#endif",
+        "#define RDSL_SELECTF(m, a, b) \\",
+        "    ((rdsl_f32v)((((rdsl_i32v)(a)) & (m)) | (((rdsl_i32v)(b)) & ~(m))))", "",
+        "/* r = base[idx] (4-byte elements, i32 indices) in the lanes where m (0 or -1)",
+        " * is set; r is 0 elsewhere and was declared 0: one gather instruction */",
+        f"#if (defined(__x86_64__) || defined(__i386__)) && {_GATHER[W][0]}",
+        "#define RDSL_GATHER32(VT, r, base, idx, m) \\",
+        f"    ((r) = (VT){_GATHER[W][1]})",
+        "#else",
+        "#define RDSL_GATHER32(VT, r, base, idx, m) do { \\",
+        f"    {loop} if ((m)[k_]) (r)[k_] = (base)[(idx)[k_]]; }} while (0)",
+        "#endif",
+        "/* base[idx] = v in the lanes where m is set, lane 0 first (the last one wins) */",
+        f"#if (defined(__x86_64__) || defined(__i386__)) && {_SCATTER[W][0]}",
+        "#define RDSL_SCATTER32(base, idx, v, m) \\",
+        f"    {_SCATTER[W][1]}",
+        "#else",
+        "#define RDSL_SCATTER32(base, idx, v, m) do { \\",
+        f"    {loop} if ((m)[k_]) (base)[(idx)[k_]] = (v)[k_]; }} while (0)",
+        "#endif", "",
+    ]
 
 
 def module_source(module: ir.Module, width: int, stem: str) -> str:

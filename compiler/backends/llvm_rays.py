@@ -108,6 +108,11 @@ def _lower_query(lw: Lowering, ins: ir.Instr) -> list[L.Value]:
         return [b.and_(res, mask) if mask is not None else res]
     geom = b.load(field("geomID"), typ=ity, align=4)
     valid_hit = b.icmp_signed("!=", geom, const(ity, INVALID_ID))
+    # a hit inside an instance: its geometry IDs start at the instance's own
+    # (runtime/embree_instance.py), so mesh geomID of instance instID is instID + geomID
+    inst = b.load(field("instID"), typ=ity, align=4)
+    in_instance = b.icmp_signed("!=", inst, const(ity, INVALID_ID))
+    geom = b.select(in_instance, b.add(inst, geom), geom)
     if mask is not None:
         valid_hit = b.and_(valid_hit, mask)
     return [tfar, b.load(field("u"), typ=fty, align=4), b.load(field("v"), typ=fty, align=4),

@@ -7,7 +7,7 @@ The body is printed by the SIMD C printer (:class:`rdsl.compiler.backends.c.Simd
 a bitwise cast, ``convert_T`` for a lane-wise conversion, ``(T)(a, b, ...)`` for a vector
 literal, a lane addressed through a pointer.  The prelude gives OpenCL C the names the
 printer uses (``int32_t``, ``rdsl_f32v``..., ``sqrtf``...).  Measured on PoCL
-(``bench/targets.py``): PoCL does not vectorize the work-items of the scalar (W = 1) form
+(``bench/plugin_targets.py``): PoCL does not vectorize the work-items of the scalar (W = 1) form
 of a shading kernel (no ymm/zmm register in its code), while the vector form runs its ops
 on SIMD registers, 3 to 10 times faster.
 
@@ -77,6 +77,7 @@ class OpenCLPrinter(SimdC):
     """The SIMD C printer with OpenCL C's vector spellings."""
 
     target_name: ClassVar[str] = "opencl"
+    float_minmax = False  # fmin/fmax are not select(a < b, a, b) on NaN: the bitwise select
 
     def cl_vec(self, ctype: str) -> str | None:
         """The OpenCL vector type of one of the printer's vector type names, else None."""
@@ -100,6 +101,9 @@ class OpenCLPrinter(SimdC):
 
     def zero(self, t: ir.ScalarType) -> str:
         return "0" if t.lanes == 1 else f"(({self.ctype(t)})(0))"
+
+    def gather_macro(self, e: str, idx: ir.Value, mask: ir.Value) -> None:
+        return None  # no intrinsics: the lane loop, which PoCL vectorizes as it can
 
     def render_divrem(self, ins: ir.Instr) -> str | None:
         t = self.elem(ins)

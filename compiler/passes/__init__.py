@@ -34,6 +34,7 @@ def pass_names() -> list[str]:
 
 def _load_all() -> None:
     # import every pass module so that its @register runs
+    from . import ad_reverse, eliminate  # noqa: F401
     from . import evaluate, inline, lift, optimize, scalarize, specialize, vectorize  # noqa: F401
 
 

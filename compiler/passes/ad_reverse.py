@@ -58,6 +58,7 @@ GRAD_BUFFER, ROW = "gPRM", "ad_row"
 # into gT at row ad_row_T (d loss / d texel, for bitmap textures' ``<id>.data``)
 TEXEL_BUFFER = "T"
 DIFFERENTIATED = {PARAM_BUFFER: (GRAD_BUFFER, ROW), TEXEL_BUFFER: ("gT", "ad_row_T")}
+SWEEP = "ad.sweep"  # on the first instruction of a sweep that follows its forward part
 _NO_DERIVATIVE = {Op.FLOOR, Op.CEIL, Op.CAST, Op.BITCAST, Op.CONST, Op.LOAD, Op.REM}
 
 
@@ -106,7 +107,9 @@ class _Reverse:
             a = Value(F32, f"a.{name}")
             seed_params.append(Param(a))
             self.acc(adj, v, a, b)
+        mark = len(fn.body.instrs)
         self.sweep(fn.body.instrs[:], adj, b)
+        _mark_sweep(fn.body, mark)
         grads = [adj.get(p.value) or b.const(0.0, F32) for p in seeds]
         ret.operands = [*ret.operands, *grads]
         fn.body.instrs.append(ret)
@@ -304,9 +307,11 @@ class _Reverse:
         new, m = self.clone_into(block, args, b)
         y = block.instrs[-1].operands
         local: dict[Value, Value] = {}
+        mark = len(b.block.instrs)
         for i, a in seeds.items():
             self.acc(local, m.get(y[i], y[i]), a, b)
         self.sweep(new, local, b)
+        _mark_sweep(b.block, mark)
         defined = {r for ins in new for r in _defined(ins)}
         return local, m, defined
 
@@ -471,6 +476,14 @@ _F32_JSON = {"kind": "scalar", "dtype": "f32"}
 
 def _zero(t) -> object:
     return 0.0 if t == F32 else False if t == BOOL else 0
+
+
+def _mark_sweep(block: Block, start: int) -> None:
+    """Tag the first instruction of the reverse sweep that follows a forward part in
+    ``block`` (a function's body, an adjoint loop's body): where ``eliminate`` and the tape
+    count (passes/ad_tape.py) split the block."""
+    if start < len(block.instrs):
+        block.instrs[start].attrs[SWEEP] = True
 
 
 def _one(ins: Instr) -> Block:

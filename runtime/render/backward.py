@@ -29,6 +29,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from ...compiler.build import elimination_threshold
 from ...compiler.diagnostics import CompileError
 from ...core.scene_spec import Slot
 from .differentiable import Texels, _lookup, ad_twin
@@ -89,7 +90,8 @@ CELLS_AT_ONCE = 2048
 
 # long: two passes over the batches, then the reduction
 def backward(scene: Scene, d_img: Any, params: list[str], spp: int | None = None,
-             seed: int | None = None, threads: int | None = None) -> dict[str, np.ndarray]:
+             seed: int | None = None, threads: int | None = None,
+             eliminate: bool | int = False) -> dict[str, np.ndarray]:
     """d loss / d parameter for each name of ``params``, given d loss / d image."""
     from .renderer import BATCH_SAMPLES
 
@@ -98,7 +100,7 @@ def backward(scene: Scene, d_img: Any, params: list[str], spp: int | None = None
     seed = scene.seed if seed is None else int(seed)
     scene.use_generic()
     plain = scene.compile()
-    twin = ad_twin(scene, "reverse")
+    twin = ad_twin(scene, "reverse", elimination_threshold("reverse", eliminate))
     mod = twin.compile()
     for m in (plain, mod):
         if m.traces_rays:

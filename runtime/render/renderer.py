@@ -15,7 +15,6 @@ import os
 import time
 import warnings
 from collections.abc import Callable
-from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -27,32 +26,28 @@ from ...compiler.diagnostics import CompileError
 from ...compiler.passes.ad_forward import TANGENT_BUFFER
 from ...compiler.passes.specialize import PARAM_BUFFER, describe, parameter_slots
 from ...compiler.targets import Target
-from ...core.color import RGB, ColorModel
-from ...core.scene_spec import Instance, SceneSpec
-from ..tables import fill_tables
+from ...core.color import ColorModel
+from ...core.scene_spec import SceneSpec
 from ..scene import load_scene_description
 from ..scene.reads import recording
 from ..scene.samplers import sample_count
-from .bvh import scene_bvh
+from ..tables import fill_tables
 from .bsdfs import (
-    bsdf_instance,
     dispersion_warnings,
     polarization_warnings,
     split_leaves,
 )
-from .colors import spectrum_value
-from .declared import declared_instance
+from .bvh import scene_bvh
 from .differentiable import SceneParams, gradient, render_forward
 from .emitters import KINDS as EMITTER_KINDS
-from .emitters import EmitterTables, emitter_tables
 from .film import develop, film_reach, film_uniforms, new_accumulator, sample_weights
+from .flatten import SceneBuffers, flatten
 from .integrators import integrator_instances, integrator_plan
 from .kernel_source import kernel_source, scene_plugins
 from .progress import Progress
 from .shapes import FLAGS as SHAPE_FLAGS
+from .shapes import INSTANCED, INSTANCED_KIND
 from .shapes import KINDS as SHAPE_KINDS
-from .shapes import RECORD, shape_record, user_geometry
-from .textures import TextureTable
 
 ACCELS = ("embree", "bvh")  # how rays are traced (`--accel`)
 # samples per kernel call: small enough that a batch's sample buffers stay in cache
@@ -65,126 +60,6 @@ QUICK_SAMPLES = 1 << 21
 
 class RenderCancelled(Exception):
     """``Scene.render``'s ``cancel`` asked it to stop."""
-
-
-@dataclass
-class SceneBuffers:
-    """The scene's triangles and lights, flattened for the kernels (layout in
-    stdlib/render/geometry.rdsl and stdlib/render/lights.rdsl)."""
-
-    P: np.ndarray
-    N: np.ndarray
-    UV: np.ndarray
-    F: np.ndarray
-    G: np.ndarray
-    lights: EmitterTables  # LC, LT and the emitter tables
-    meshes: list[tuple[np.ndarray, np.ndarray]] = field(default_factory=list)
-    T: np.ndarray = field(default_factory=lambda: np.zeros(3, np.float32))  # texels
-    textures: list[Instance] = field(default_factory=list)
-    # the BVH of `--accel bvh` (stdlib/render/bvh.rdsl; an empty tree with Embree)
-    BV: np.ndarray = field(default_factory=lambda: np.zeros(1, np.float32))
-    BI: np.ndarray = field(default_factory=lambda: np.zeros(4, np.int32))
-
-    @property
-    def nlight(self) -> int:
-        """The number of emitters (an area-lit shape counts as one)."""
-        return self.lights.nemitter
-
-    def args(self) -> list[np.ndarray]:
-        return [self.P, self.N, self.UV, self.F, self.G, self.lights.LC, self.lights.LT,
-                self.T, *self.lights.args(), self.BV, self.BI]
-
-
-def _flat(v: np.ndarray, f: np.ndarray, normals: Any) -> bool:
-    """Whether every triangle's vertex normals are its geometric normal (a rectangle, a
-    cube): interpolating them gives that normal again, so the mesh is shaded with face
-    normals, and the kernels skip reading and interpolating them."""
-    n = np.asarray(normals, np.float64)[f]  # (M, 3 vertices, 3)
-    tri = v.astype(np.float64)[f]
-    ng = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
-    ng /= np.maximum(np.linalg.norm(ng, axis=1, keepdims=True), 1e-30)
-    n = n / np.maximum(np.linalg.norm(n, axis=2, keepdims=True), 1e-30)
-    return bool(len(f)) and bool(np.all(np.einsum("mkj,mj->mk", n, ng) > 1 - 1e-6))
-
-
-def flatten(desc: Any, triangulate: bool = False, model: ColorModel = RGB
-            ) -> tuple[SceneBuffers, list[Instance], list[Instance]]:
-    """Concatenate the scene's meshes and collect its BSDF and emitter instances.  Analytic
-    spheres and disks become Embree user geometry with a record in ``P`` (after the
-    vertices), unless ``triangulate`` asks for every shape's triangle mesh.  Colours in
-    buffers are stored as ``model`` reads them (runtime/render/colors.py)."""
-    P, N, UV, F, G = [], [], [], [], []
-    bsdfs: list[Instance] = []
-    bsdf_ids: dict[int, int] = {}
-    textures = TextureTable()
-    emitters: list[Instance] = []
-    lights: list[tuple[int, int, float]] = []  # (triangle, shape, area)
-    records: list[tuple[int, Any]] = []  # (shape, Analytic) of the analytic shapes
-    nv = nt = 0
-    meshes: list[Any] = []
-    for shape_index, shape in enumerate(desc.shapes):
-        key = id(shape.bsdf)
-        if key not in bsdf_ids:
-            bsdf_ids[key] = len(bsdfs)
-            bsdfs.append(bsdf_instance(shape.bsdf, textures))
-        emitter = -1
-        if shape.emitter is not None:
-            emitter = len(emitters)
-            emitters.append(_area_instance(shape.emitter, textures))
-            # named as Mitsuba's traverse names it (`light.emitter.radiance`)
-            emitters[-1].name = f"{shape.id or f'shape{shape_index}'}.emitter"
-        analytic = None if triangulate else shape.analytic
-        if analytic is not None:  # G's first entry is set below, with the records
-            meshes.append(user_geometry(analytic))
-            records.append((shape_index, analytic))
-            if emitter >= 0:
-                lights.append((-1, shape_index, analytic.area))
-            G.append(np.array([-1, bsdf_ids[key], emitter, SHAPE_FLAGS[analytic.kind]],
-                              np.int32))
-            continue
-        m = shape.mesh
-        v = np.ascontiguousarray(m.vertices, np.float32)
-        f = np.ascontiguousarray(m.faces, np.uint32)
-        meshes.append((v, f))
-        flags = 0
-        P.append(v.reshape(-1))
-        if m.normals is not None and not m.face_normals and not _flat(v, f, m.normals):
-            N.append(np.asarray(m.normals, np.float32).reshape(-1))
-            flags |= 1
-        else:
-            N.append(np.zeros(3 * len(v), np.float32))
-        if m.uvs is not None:
-            UV.append(np.asarray(m.uvs, np.float32).reshape(-1))
-            flags |= 2
-        else:
-            UV.append(np.zeros(2 * len(v), np.float32))
-        F.append((f.astype(np.int64) + nv).astype(np.int32).reshape(-1))
-        if emitter >= 0:
-            tri = v[f]
-            areas = 0.5 * np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]),
-                                         axis=1)
-            lights += [(nt + i, shape_index, float(a)) for i, a in enumerate(areas)]
-        G.append(np.array([nt, bsdf_ids[key], emitter, flags], np.int32))
-        nv += len(v)
-        nt += len(f)
-    # the analytic shapes' records follow the vertices in P; G's first entry points at them
-    analytic_lights = {}
-    for j, (shape_index, analytic) in enumerate(records):
-        offset = 3 * nv + RECORD * j
-        G[shape_index][0] = offset
-        P.append(shape_record(analytic))
-        analytic_lights[shape_index] = (SHAPE_KINDS[analytic.kind], offset, analytic.area)
-
-    def cat(xs: list[np.ndarray], dt: Any) -> np.ndarray:  # never empty: kernels need memory
-        return np.ascontiguousarray(np.concatenate(xs) if xs else np.zeros(1, dt), dt)
-
-    bufs = SceneBuffers(cat(P, np.float32), cat(N, np.float32), cat(UV, np.float32),
-                        cat(F, np.int32), cat(G, np.int32),
-                        emitter_tables(desc, lights, len(emitters), analytic_lights, model,
-                                      textures),
-                        meshes)
-    bufs.T, bufs.textures = textures.buffer(model), textures.instances
-    return bufs, bsdfs, emitters
 
 
 def _geometry_key(bufs: SceneBuffers) -> str:
@@ -200,23 +75,11 @@ def _geometry_key(bufs: SceneBuffers) -> str:
 
 
 def _shape_kind(flags: int) -> int:
-    """geometry.rdsl's shape kind (0 mesh, 1 sphere, 2 disk) from G's flags."""
+    """geometry.rdsl's shape kind (0 mesh, 1 sphere, 2 disk, 3 instanced mesh) from G's
+    flags."""
+    if flags & INSTANCED:
+        return INSTANCED_KIND
     return next((SHAPE_KINDS[k] for k, bit in SHAPE_FLAGS.items() if flags & bit), 0)
-
-
-def _area_instance(em: Any, textures: TextureTable) -> Instance:
-    """The ``area`` emitter instance of an emissive shape (its radiance may be a texture),
-    or the instance of a user's emitter plugin."""
-    if getattr(em, "decl", None) is not None:
-        return declared_instance(em, textures, illuminant=True)
-    if em.type != "area":
-        raise CompileError(f"emitter `{em.type}` is not supported by the renderer yet", em.loc)
-    radiance = em.params["radiance"]
-    if getattr(radiance, "category", None) == "texture":
-        return Instance(em.type, {"radiance": textures.ref(radiance, "area.radiance",
-                                                           "emitted")})
-    return Instance(em.type, {"radiance": spectrum_value(
-        radiance, "area.radiance", illuminant=True, loc=em.loc)})
 
 
 class Scene:
@@ -269,8 +132,8 @@ class Scene:
             self.spp = int(self.desc.sensor.sampler.params.get("sample_count", 4))
             self.seed = int(self.desc.sensor.sampler.params.get("seed", 0))
             integrator_plan(self.desc.integrator).check_variant(model)
-            self.buffers, self.bsdfs, self.emitters = flatten(self.desc, self.triangulate,
-                                                              model)
+            self.buffers, self.bsdfs, self.emitters = flatten(
+                self.desc, self.triangulate, model, instancing=self.accel == "embree")
         for message in [*polarization_warnings(self.desc, model),
                         *dispersion_warnings(self.desc, model)]:
             warnings.warn(message, stacklevel=3)
@@ -395,13 +258,14 @@ class Scene:
         return gradient(self, names, loss_grad, spp, seed)
 
     def backward(self, d_img: Any, params: list[str], spp: int | None = None,
-                 seed: int | None = None, threads: int | None = None
-                 ) -> dict[str, np.ndarray]:
+                 seed: int | None = None, threads: int | None = None,
+                 eliminate: bool | int = False) -> dict[str, np.ndarray]:
         """d loss / d parameter for every name of ``params`` from d loss / d image, by one
-        adjoint render (reverse mode): runtime/render/backward.py."""
+        adjoint render (reverse mode): runtime/render/backward.py.  ``eliminate``: build
+        the adjoint kernel with graph elimination (True: threshold 10; docs/ad.md)."""
         from .backward import backward
 
-        return backward(self, d_img, params, spp, seed, threads)
+        return backward(self, d_img, params, spp, seed, threads, eliminate)
 
     def _folding(self, scene: SceneSpec) -> list[str]:
         """What the build folds (specialized) or reads at run time (generic), for the report."""

@@ -20,6 +20,8 @@ from ..scene.analytic import KINDS, Analytic
 
 RECORD = 32  # floats per analytic shape in P (geometry.rdsl: shape_record_size())
 FLAGS = {"sphere": 4, "disk": 8}  # G's flag bits of the analytic kinds
+INSTANCED = 16  # G's flag bit of a shapegroup's mesh, drawn by an instance
+INSTANCED_KIND = 3  # geometry.rdsl's shape kind of those
 
 
 def shape_record(shape: Analytic) -> np.ndarray:
@@ -37,6 +39,19 @@ def shape_record(shape: Analytic) -> np.ndarray:
     return rec
 
 
+def instance_record(to_world: np.ndarray) -> np.ndarray:
+    """An instance's record for ``P`` (geometry.rdsl): rows of to_world, rows of its inverse
+    transpose (normals) and the sign of its determinant."""
+    m = np.asarray(to_world, np.float64)
+    rec = np.zeros(RECORD)
+    rec[0:12] = m[:3, :4].reshape(-1)
+    normal = np.zeros((3, 4))
+    normal[:, :3] = np.linalg.inv(m[:3, :3]).T
+    rec[12:24] = normal.reshape(-1)
+    rec[24] = 1.0 if np.linalg.det(m[:3, :3]) > 0 else -1.0
+    return rec
+
+
 def user_geometry(shape: Analytic) -> UserShape:
     """The Embree user geometry that intersects ``shape``."""
     if shape.kind == "sphere":
@@ -44,4 +59,5 @@ def user_geometry(shape: Analytic) -> UserShape:
     return user_disk(shape.to_world)
 
 
-__all__ = ["FLAGS", "KINDS", "RECORD", "shape_record", "user_geometry"]
+__all__ = ["FLAGS", "INSTANCED", "INSTANCED_KIND", "KINDS", "RECORD", "instance_record",
+           "shape_record", "user_geometry"]

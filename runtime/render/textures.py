@@ -27,6 +27,7 @@ from ...compiler.diagnostics import CompileError
 from ...core.color import RGB, ColorModel
 from ...core.scene_spec import Instance, SpectrumValue, TextureRef
 from ..plugins import stdlib_names
+from ..scene.mesh_attributes import attribute_textures
 from ..scene.reads import memoized
 from .colors import encode_texels, spectrum_value
 from .declared import declared_instance, needs_eval_1
@@ -104,6 +105,32 @@ class TextureTable:
         self._images: dict[tuple[str, bool, str], tuple[int, int, int, Any, float]] = {}
         self._texels: list[tuple[np.ndarray, bool]] = []  # (texels, encoded as a colour)
         self._count = 0
+        self._attributes: list[tuple[Instance, Any, str]] = []  # mesh_attribute instances
+
+    def fill_attributes(self, meshes: list[tuple[int, Any, Any]]) -> None:
+        """Store the values of the mesh_attribute textures for ``meshes``, (first triangle,
+        mesh, BSDF) each, where their BSDFs read them: a face attribute's value per
+        triangle, a vertex attribute's values at each triangle's three corners (the
+        kernels interpolate them), over the triangles from the first mesh to the last."""
+        for inst, plugin, usage in self._attributes:
+            name, face = plugin.params["name"], inst.params["face"]
+            users = [(first, m) for first, m, bsdf in meshes
+                     if any(t is plugin for t in attribute_textures(bsdf))]
+            if not users:
+                continue
+            lo = min(first for first, _ in users)
+            hi = max(first + len(m.faces) for first, m in users)
+            per = 1 if face else 3
+            values = np.zeros(((hi - lo) * per, 3), np.float32)
+            for first, m in users:
+                a = np.asarray(m.attributes[name], np.float32)
+                a = np.repeat(a, 3, axis=1) if a.shape[1] == 1 else a
+                rows = a if face else a[m.faces.astype(np.int64)].reshape(-1, 3)
+                values[(first - lo) * per:(first - lo) * per + len(rows)] = rows
+            values *= np.float32(plugin.params["scale"])
+            inst.params.update(offset=self._count, first=lo, count=hi - lo)
+            self._texels.append((values.reshape(-1), usage != "scalar"))
+            self._count += len(values)
 
     def ref(self, plugin: Any, what: str, usage: str = "colour") -> TextureRef:
         """The reference for texture ``plugin`` setting ``what``, a parameter of ``usage``
@@ -132,6 +159,14 @@ class TextureTable:
         emitted = usage == "emitted"
         if getattr(plugin, "decl", None) is not None:  # textures of textures: not supported
             return declared_instance(plugin, None, illuminant=emitted)
+        if plugin.type == "mesh_attribute":  # its values: fill_attributes(), once meshes are
+            if emitted:
+                raise CompileError(f"{what}: a mesh_attribute texture cannot set emitted "
+                                   "light yet", plugin.loc)
+            inst = Instance(plugin.type, {"offset": 0, "first": 0, "count": 0,
+                                          "face": p["name"].startswith("face_")}, name)
+            self._attributes.append((inst, plugin, usage))
+            return inst
         if plugin.type not in ("bitmap", "checkerboard"):
             raise CompileError(f"{what}: texture `{plugin.type}` is not supported by the "
                                f"renderer yet (supported: {', '.join(stdlib_names('texture'))})",

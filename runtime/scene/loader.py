@@ -26,18 +26,14 @@ import numpy as np
 from ...compiler.ir import Loc
 from ..plugins import KINDS as PLUGIN_KINDS
 from ..plugins import PluginDecl, PluginRegistry, scene_spec, stdlib_names
-from . import meshes
 from . import transform as xf
 from .analytic import Analytic
-from .cylinder import cylinder_frame, cylinder_mesh
 from .errors import scene_error
-from .meshes import Mesh, MeshError
-from .principled import resolve_principled
-from .reads import memoized
-from .samplers import attach_samplers, finish_sampler
+from .finish import Finishers
+from .meshes import Mesh
+from .nodes import param_str as _param_str
+from .samplers import attach_samplers
 from .schema import (
-    AOV_TYPES,
-    BITMAP_FORMATS,
     KIND_ACCEPTS,
     KIND_NAMES,
     REQUIRED,
@@ -46,13 +42,10 @@ from .schema import (
     PluginSpec,
     plugin_types,
 )
-from .sensors import METERS, attach_meter, finish_sensor, top_level_sensor
-from .spectra import Color, as_reflectance, conductor_ior, lookup_ior
+from .sensors import top_level_sensor
+from .shape_build import ShapeFinisher, drawn_shapes, shape_points
+from .spectra import Color, as_reflectance, lookup_ior
 from .xml import Child, ObjectNode, Prop, SceneTree, read_scene
-
-# the largest Cauchy B term accepted (um^2): glasses are below 0.02, so a larger value is a
-# unit mistake (nm^2) rather than a material
-MAX_CAUCHY_B = 1.0
 
 
 @dataclass
@@ -123,7 +116,10 @@ def load_scene_description(path: str | Path, *, plugins: Any = (),
     return _Builder(tree, PluginRegistry.for_scene(tree.path, plugins)).build()
 
 
-class _Builder:
+class _Builder(ShapeFinisher, Finishers):
+    """Instantiates the XML tree's objects; ``finish_<category>`` (shape_build.py, finish.py)
+    checks each one and resolves its derived values."""
+
     def __init__(self, tree: SceneTree, registry: PluginRegistry) -> None:
         self.tree = tree
         self.registry = registry
@@ -152,10 +148,11 @@ class _Builder:
             elif cat == "sensor":
                 sensors.append(top_level_sensor(obj, ch.loc))
             elif cat == "shape":
-                shapes.append(obj)
-                sensors += [obj.sensor] if obj.sensor is not None else []
-                if obj.emitter is not None:
-                    emitters.append(obj.emitter)
+                for shape in drawn_shapes(obj):
+                    shapes.append(shape)
+                    sensors += [shape.sensor] if shape.sensor is not None else []
+                    if shape.emitter is not None:
+                        emitters.append(shape.emitter)
             elif cat == "emitter":
                 if obj.type == "area" or obj.decl is not None:
                     raise scene_error(f"an '{obj.type}' emitter must be nested inside a "
@@ -180,8 +177,8 @@ class _Builder:
 
     def default_sensor(self, shapes: list[Shape]) -> Sensor:
         # Mitsuba frames the scene's bounding box with a 45 degree camera.
-        if shapes:
-            pts = np.vstack([s.mesh.vertices for s in shapes]).astype(np.float64)
+        pts = np.vstack([np.zeros((0, 3)), *(shape_points(s) for s in shapes)])
+        if len(pts):
             lo, hi = pts.min(axis=0), pts.max(axis=0)
         else:
             lo, hi = np.zeros(3), np.zeros(3)
@@ -339,219 +336,6 @@ class _Builder:
         return self.tree.resolve_file(_param_str(node, name), node.base_dir,
                                       f"{self.what(node)}: {what}", loc)
 
-    # -- per-category checks and derived values ----------------------------------------
-    def finish_shape(self, obj: Shape, node: ObjectNode, objects: dict) -> None:
-        p = obj.params
-        m = p["to_world"] if p["to_world"] is not None else xf.identity()
-        if xf.singular(m):
-            raise scene_error(f"{self.what(node)}: 'to_world' is singular or not finite",
-                              _loc(node, "to_world"))
-        if obj.type == "sphere":
-            if p["radius"] <= 0:
-                raise scene_error("sphere: 'radius' must be positive", _loc(node, "radius"))
-            center = p["center"] if p["center"] is not None else np.zeros(3)
-            p["center"] = center
-            m = m @ xf.translate(center) @ xf.scale(p["radius"])
-            mesh = meshes.sphere()
-        elif obj.type in ("rectangle", "cube", "disk"):
-            mesh = getattr(meshes, obj.type)()
-        elif obj.type == "cylinder":
-            m, mesh = m @ cylinder_frame(p, lambda k: _loc(node, k)), cylinder_mesh()
-        else:
-            path = self.file(node, "filename", "mesh")
-            try:
-                mesh = memoized(path, (obj.type, p.get("flip_tex_coords"),
-                                       p.get("shape_index")),
-                                lambda: meshes.read_mesh(obj.type, path, obj.params))
-            except MeshError as e:
-                raise scene_error(f"{self.what(node)}: cannot load mesh file '{p['filename']}':"
-                                  f" {e}", _loc(node, "filename")) from None
-            except OSError as e:
-                raise scene_error(f"{self.what(node)}: cannot read mesh file "
-                                  f"'{p['filename']}': {e.strerror}",
-                                  _loc(node, "filename")) from None
-            p["filename"] = str(path)
-        if obj.type in ("sphere", "disk") and not p["triangulate"]:
-            obj.analytic = Analytic(obj.type, m, bool(p["flip_normals"]))
-            problem = obj.analytic.uniform_scale_problem()
-            if problem:  # Mitsuba warns and keeps a sphere of radius |to_world (1, 0, 0)|
-                loc = _loc(node, "to_world")
-                warnings.warn(f"{loc.file}:{loc.line}: sphere: {problem} (the sphere keeps "
-                              f"radius {obj.analytic.radius:g}); set 'triangulate' to render "
-                              "the transformed mesh instead", stacklevel=2)
-        face_normals = bool(p.get("face_normals") or mesh.face_normals)
-        p["to_world"] = m
-        try:
-            obj.mesh = meshes.to_world(mesh, m, p["flip_normals"], face_normals)
-        except MeshError as e:
-            raise scene_error(f"{self.what(node)}: {e}", _loc(node, "to_world")) from None
-        bsdfs, ems = objects["bsdf"], objects["emitter"]
-        # Mitsuba's default (shape.cpp): diffuse, black on an emitter's shape
-        obj.bsdf = bsdfs[0][0] if bsdfs else self.default(
-            "bsdf", "diffuse", **({"reflectance": 0.0} if ems else {}))
-        if ems:
-            em, ch = ems[0]
-            if em.type != "area" and em.decl is None:
-                raise scene_error(f"only an 'area' emitter can be attached to a shape, not "
-                                  f"'{em.type}'", ch.loc)
-            obj.emitter = em
-        if objects.get("sensor"):
-            attach_meter(obj, *objects["sensor"][0])
-
-    def finish_bsdf(self, obj: Plugin, node: ObjectNode, objects: dict) -> None:
-        p = obj.params
-        obj.children = [b for b, _ in objects.get("bsdf", [])]
-        if obj.decl is not None:  # a user plugin: its params are its own, not Mitsuba's
-            return
-        if obj.type == "principled":
-            resolve_principled(p, lambda k: _loc(node, k) is not node.loc, self.what(node),
-                               lambda k: _loc(node, k))
-        if "material" in p:
-            given = [k for k in ("eta", "k") if p[k] is not None]
-            if given and "material" in node.props:
-                raise scene_error(f"{self.what(node)}: give either 'material' or 'eta'/'k', "
-                                  "not both", _loc(node, "material"))
-            if given:
-                p["eta"] = p["eta"] if p["eta"] is not None else Color.gray(0.0)
-                p["k"] = p["k"] if p["k"] is not None else Color.gray(1.0)
-            else:
-                p["eta"], p["k"] = conductor_ior(p["material"], _loc(node, "material"))
-        if "alpha_u" in p:
-            has_u, has_v = p["alpha_u"] is not None, p["alpha_v"] is not None
-            if has_u != has_v:
-                raise scene_error(f"{self.what(node)}: give both 'alpha_u' and 'alpha_v'",
-                                  _loc(node, "alpha_u" if has_u else "alpha_v"))
-            if has_u and "alpha" in node.props:
-                raise scene_error(f"{self.what(node)}: give either 'alpha' or "
-                                  "'alpha_u'/'alpha_v', not both", _loc(node, "alpha"))
-            if not has_u:
-                p["alpha_u"] = p["alpha_v"] = p["alpha"]
-        if "int_ior" in p:
-            p["eta"] = p["int_ior"] / p["ext_ior"] if p["ext_ior"] > 0 else 0.0
-        for side in ("int", "ext"):
-            b = p.get(f"{side}_cauchy_b")
-            if b is not None and not 0.0 <= b <= MAX_CAUCHY_B:
-                raise scene_error(
-                    f"{self.what(node)}: '{side}_cauchy_b' is {b:g}; Cauchy's B term is in "
-                    f"um^2 and must lie in [0, {MAX_CAUCHY_B:g}] (BK7: 0.00420, dense flint "
-                    "glass: ~0.014; a value in nm^2 is 10^6 times too large)",
-                    _loc(node, f"{side}_cauchy_b"))
-
-    def finish_texture(self, obj: Plugin, node: ObjectNode, objects: dict) -> None:
-        p = obj.params
-        if p.get("to_uv") is None and (obj.decl is None or "to_uv" in p):
-            p["to_uv"] = xf.identity()
-        if obj.type == "bitmap" and obj.decl is None:
-            path = self.file(node, "filename", "texture")
-            if path.suffix.lower() not in BITMAP_FORMATS:
-                raise scene_error(f"bitmap: image format '{path.suffix}' of '{p['filename']}' "
-                                  f"is not supported; accepted: {', '.join(BITMAP_FORMATS)}",
-                                  _loc(node, "filename"))
-            p["filename"] = str(path)
-
-    def finish_emitter(self, obj: Plugin, node: ObjectNode, objects: dict) -> None:
-        p = obj.params
-        if obj.decl is not None:
-            return
-        if "to_world" in p and p["to_world"] is None:
-            p["to_world"] = xf.identity()
-        if obj.type == "point" and p["position"] is not None:
-            if "to_world" in node.props:
-                raise scene_error("point emitter: give either 'position' or 'to_world'",
-                                  _loc(node, "position"))
-            p["to_world"] = xf.translate(p["position"])
-        if obj.type == "point":
-            p["position"] = p["to_world"][:3, 3].copy()
-        if obj.type == "spot" and p["beam_width"] is None:
-            p["beam_width"] = p["cutoff_angle"] * 0.75
-        if obj.type == "directional":
-            if p["direction"] is not None:
-                if "to_world" in node.props:
-                    raise scene_error("directional emitter: give either 'direction' or "
-                                      "'to_world'", _loc(node, "direction"))
-                d = p["direction"]
-                if not np.any(d):
-                    raise scene_error("directional emitter: 'direction' is zero",
-                                      _loc(node, "direction"))
-                p["to_world"] = xf.look_at([0, 0, 0], d)
-            p["direction"] = p["to_world"][:3, 2] / np.linalg.norm(p["to_world"][:3, 2])
-        if obj.type == "envmap":
-            path = self.file(node, "filename", "environment map")
-            if path.suffix.lower() not in BITMAP_FORMATS:
-                raise scene_error(f"envmap: image format '{path.suffix}' is not supported; "
-                                  f"accepted: {', '.join(BITMAP_FORMATS)}", _loc(node, "filename"))
-            p["filename"] = str(path)
-
-    def finish_integrator(self, obj: Plugin, node: ObjectNode, objects: dict) -> None:
-        p = obj.params
-        obj.children = [i for i, _ in objects.get("integrator", [])]
-        if obj.decl is not None:  # a user's plugin (or one given as a file): its own params
-            return
-        p["nested_names"] = [ch.name or f"_arg_{k}"
-                             for k, (_, ch) in enumerate(objects.get("integrator", []))]
-        if obj.type == "path":
-            if p["max_depth"] < -1:
-                raise scene_error("path: 'max_depth' must be -1 (infinite) or >= 0",
-                                  _loc(node, "max_depth"))
-            if p["rr_depth"] <= 0:
-                raise scene_error("path: 'rr_depth' must be > 0", _loc(node, "rr_depth"))
-        elif obj.type == "direct":  # Mitsuba's checks of direct.cpp
-            ss = p["shading_samples"]
-            if ss is not None and (p["emitter_samples"] is not None
-                                   or p["bsdf_samples"] is not None):
-                raise scene_error("direct: cannot specify both 'shading_samples' and "
-                                  "('emitter_samples' and/or 'bsdf_samples')", node.loc)
-            for k in ("emitter_samples", "bsdf_samples"):
-                if p[k] is None:
-                    p[k] = ss if ss is not None else 1
-                if p[k] < 0:
-                    raise scene_error(f"direct: '{k}' must be >= 0", _loc(node, k))
-            if p["emitter_samples"] + p["bsdf_samples"] == 0:
-                raise scene_error("direct: must have at least 1 BSDF or emitter sample",
-                                  node.loc)
-        elif obj.type == "aov":
-            aovs = []
-            for item in (s.strip() for s in p["aovs"].split(",")):
-                name, sep, kind = item.partition(":")
-                if not sep or not name.strip() or kind.strip() not in AOV_TYPES:
-                    raise scene_error(f"aov: bad entry '{item}' in 'aovs'; write name:type with "
-                                      f"type one of {', '.join(AOV_TYPES)}", _loc(node, "aovs"))
-                aovs.append((name.strip(), kind.strip()))
-            p["aov_list"] = aovs
-
-    def finish_sensor(self, obj: Sensor, node: ObjectNode, objects: dict) -> None:
-        one = {"width": 1, "height": 1} if obj.type in METERS else {}  # a one-pixel film
-        obj.film = objects["film"][0][0] if objects["film"] else self.default("film", "hdrfilm",
-                                                                                **one)
-        obj.sampler = objects["sampler"][0][0] if objects["sampler"] else None
-        finish_sensor(obj, lambda k: _loc(node, k))
-
-    def finish_film(self, obj: Plugin, node: ObjectNode, objects: dict) -> None:
-        p = obj.params
-        obj.children = []
-        p["rfilter"] = (objects["rfilter"][0][0] if objects["rfilter"]
-                        else self.default("rfilter", "gaussian"))
-        for k in ("width", "height"):
-            if p[k] <= 0:
-                raise scene_error(f"hdrfilm: '{k}' must be positive", _loc(node, k))
-        p["crop_width"] = p["width"] if p["crop_width"] is None else p["crop_width"]
-        p["crop_height"] = p["height"] if p["crop_height"] is None else p["crop_height"]
-        for axis, size in (("x", "width"), ("y", "height")):
-            off, crop = p[f"crop_offset_{axis}"], p[f"crop_{size}"]
-            if off < 0 or crop <= 0 or off + crop > p[size]:
-                raise scene_error(f"hdrfilm: invalid crop window: crop_offset_{axis}={off} and "
-                                  f"crop_{size}={crop} do not fit in {size}={p[size]}",
-                                  _loc(node, f"crop_{size}" if f"crop_{size}" in node.props
-                                       else f"crop_offset_{axis}"))
-
-    def finish_rfilter(self, obj: Plugin, node: ObjectNode, objects: dict) -> None:
-        for k, v in obj.params.items():
-            if v <= 0:
-                raise scene_error(f"rfilter '{obj.type}': '{k}' must be positive", _loc(node, k))
-
-    def finish_sampler(self, obj: Plugin, node: ObjectNode, objects: dict) -> None:
-        finish_sampler(obj, lambda k: _loc(node, k))
-
 
 def _declared(name: str, p: Param) -> str:
     """Where a user plugin's param is declared, for messages ("" for Mitsuba's)."""
@@ -568,20 +352,6 @@ def _constant(value: Color, what: str, kind: str, declared: str, loc: Loc) -> fl
                           f"one value{declared}", loc)
     return float(vals[0])
 
-
-def _param_str(node: ObjectNode, name: str) -> str:
-    """A string parameter as the scene wrote it (the caller checked it is present)."""
-    return str(node.props[name].value)
-
-
-def _loc(node: ObjectNode, name: str) -> Loc:
-    """The line of parameter ``name`` if the scene gave it, else the object's line."""
-    if name in node.props:
-        return node.props[name].loc
-    for ch in node.children:
-        if ch.name == name:
-            return ch.loc
-    return node.loc
 
 
 def _prop_kind(v: Any) -> str:

@@ -11,13 +11,14 @@ from __future__ import annotations
 
 import struct
 import zlib
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
 
 from ...dsl.parser import F32_OVERFLOW
 from . import transform as xf
+from .mesh_attributes import ply_attributes
 
 
 class MeshError(ValueError):
@@ -33,6 +34,8 @@ class Mesh:
     normals: np.ndarray | None = None  # (N, 3) float32
     uvs: np.ndarray | None = None      # (N, 2) float32
     face_normals: bool = False
+    # PLY attributes by Mitsuba's name (vertex_color, face_id...): (N or M, 1 or 3) float32
+    attributes: dict[str, np.ndarray] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         self.vertices = np.ascontiguousarray(self.vertices, dtype=np.float32).reshape(-1, 3)
@@ -52,6 +55,11 @@ class Mesh:
         for name, arr in (("normals", self.normals), ("uvs", self.uvs)):
             if arr is not None and len(arr) != n:
                 raise MeshError(f"{len(arr)} {name} for {n} vertices")
+        for name, arr in self.attributes.items():
+            count = n if name.startswith("vertex_") else len(self.faces)
+            if len(arr) != count or not np.all(np.isfinite(arr)):
+                raise MeshError(f"attribute '{name}' has {len(arr)} finite values for {count} "
+                                f"{'vertices' if count == n else 'triangles'}")
         if not np.all(np.isfinite(self.vertices)):
             raise MeshError("vertex positions contain NaN or infinity")
         return self
@@ -392,19 +400,25 @@ def load_ply(path: Path, flip_tex_coords: bool = False) -> Mesh:
     if key is None:
         raise MeshError("the PLY 'face' element lacks 'vertex_indices' (or 'vertex_index')")
     polys = face[key]
+    of_face = None  # the PLY face of each triangle, where polygons were split
     if isinstance(polys, np.ndarray) and polys.ndim == 2 and polys.shape[1] == 3:
         f = polys.astype(np.int64)
     else:
-        tris = []
-        for p in polys:
+        tris, of_face = [], []
+        for k, p in enumerate(polys):
             p = [int(x) for x in p]
             if len(p) < 3:
                 raise MeshError(f"a PLY face has {len(p)} vertices")
             tris += [(p[0], p[i], p[i + 1]) for i in range(1, len(p) - 1)]
+            of_face += [k] * (len(p) - 2)
         f = np.array(tris, dtype=np.int64).reshape(-1, 3)
     if len(f) and f.min() < 0:
         raise MeshError("a PLY face has a negative vertex index")
-    return Mesh(v, f, n, uv).validate()
+    props = {el.name: el.props for el in elements}
+    attrs = ply_attributes("vertex", props["vertex"], vert, str(path))
+    for name, a in ply_attributes("face", props["face"], face, str(path)).items():
+        attrs[name] = a if of_face is None else a[np.asarray(of_face, np.int64)]
+    return Mesh(v, f, n, uv, attributes=attrs).validate()
 
 
 # ---------------------------------------------------------------------------------------

@@ -103,6 +103,7 @@ _DIST = P("string", "beckmann", ("beckmann", "ggx"))
 _SHAPE = {"to_world": P("transform"), "flip_normals": P("boolean", False)}
 _MESH = {**_SHAPE, "face_normals": P("boolean", False)}
 _SHAPE_CHILDREN = {"bsdf": (0, 1), "emitter": (0, 1), "sensor": (0, 1)}
+MANY = 1 << 62  # no upper bound on nested objects
 _ROUGH = {"distribution": _DIST, "alpha": P("ftex", 0.1), "alpha_u": P("ftex"),
           "alpha_v": P("ftex"), "sample_visible": P("boolean", True)}
 _CONDUCTOR = {"material": P("string", "none"), "eta": P("color"), "k": P("color"),
@@ -151,6 +152,11 @@ _SPECS = [
                                 "flip_tex_coords": P("boolean", False)}, _SHAPE_CHILDREN),
     PluginSpec("shape", "serialized", {**_MESH, "filename": P("string", REQUIRED),
                                        "shape_index": P("integer", 0)}, _SHAPE_CHILDREN),
+    # shapes of shapes (runtime/scene/shape_build.py): a shapegroup is drawn only through its
+    # instances (Embree instancing: its meshes are stored once); merge renders its shapes
+    PluginSpec("shape", "shapegroup", {}, {"shape": (0, MANY)}),
+    PluginSpec("shape", "instance", {"to_world": P("transform")}, {"shape": (1, 1)}),
+    PluginSpec("shape", "merge", {}, {"shape": (0, MANY)}),
     # BSDFs
     PluginSpec("bsdf", "diffuse", {"reflectance": P("color", 0.5)}),
     PluginSpec("bsdf", "conductor", dict(_CONDUCTOR)),
@@ -204,6 +210,9 @@ _SPECS = [
         "raw": P("boolean", False)}),
     PluginSpec("texture", "checkerboard", {**_TEX, "color0": P("color", 0.4),
                                            "color1": P("color", 0.2)}),
+    # a PLY mesh's per-vertex or per-face attribute (runtime/scene/mesh_attributes.py)
+    PluginSpec("texture", "mesh_attribute", {"name": P("string", REQUIRED),
+                                             "scale": P("float", 1.0)}),
     # emitters
     PluginSpec("emitter", "area", {"radiance": P("color", 1.0)}),
     PluginSpec("emitter", "point", {"intensity": P("color", 1.0), "position": P("point"),
