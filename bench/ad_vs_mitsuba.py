@@ -4,7 +4,7 @@ squared error against a target the renderer itself rendered at 8x the spp), alte
 two renderers on one machine, each in a process of its own (for its peak RSS).
 
     python bench/ad_vs_mitsuba.py [--res 128] [--spp 16] [--max-depth 8] [--iterations 20]
-                                  [--rounds 2] [--cold]
+                                  [--rounds 2] [--cold] [--eliminate]
 
 Per run: the median seconds per iteration (render, loss, gradient, Adam step; excluding the
 first), the first iteration's seconds (which compiles the differentiated kernels, or loads
@@ -53,7 +53,8 @@ def run_rdsl(args) -> dict:
         img = scene.render(seed=it)
         diff = img - target
         losses.append(float(np.mean(diff * diff)))
-        grads = scene.backward(2.0 * diff / diff.size, [KEY], seed=it)
+        grads = scene.backward(2.0 * diff / diff.size, [KEY], seed=it,
+                               eliminate=args.eliminate)
         opt.step(grads)
         opt.clamp(KEY, 0.0, 1.0)
         times.append(time.perf_counter() - t)
@@ -106,7 +107,8 @@ def spawn(who: str, args, cold: bool, iterations: int | None = None) -> dict:
             env["RDSL_CACHE_DIR" if who == "rdsl" else "HOME"] = tmp
         cmd = [sys.executable, __file__, "--child", who, "--res", str(args.res), "--spp",
                str(args.spp), "--max-depth", str(args.max_depth), "--iterations",
-               str(iterations or args.iterations), "--lr", str(args.lr)]
+               str(iterations or args.iterations), "--lr", str(args.lr),
+               *["--eliminate"] * args.eliminate]
         t = time.perf_counter()
         p = subprocess.run(cmd, check=False, env=env, capture_output=True, text=True)
         wall = time.perf_counter() - t
@@ -151,6 +153,8 @@ def main() -> int:
     ap.add_argument("--lr", type=float, default=0.05)
     ap.add_argument("--rounds", type=int, default=2)
     ap.add_argument("--cold", action="store_true")
+    ap.add_argument("--eliminate", action="store_true", help="rdsl's backward with the "
+                    "eliminate pass (threshold 10)")
     ap.add_argument("--child", choices=("rdsl", "mitsuba"))
     args = ap.parse_args()
     if args.child:
