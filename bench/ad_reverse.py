@@ -30,7 +30,7 @@ NAMES = ["red.reflectance.value", "green.reflectance.value", "light.emitter.radi
 
 def adjoint_state(scene) -> tuple[int, int, int]:
     """(bytes per lane the bounce loop's adjoint carries, bytes per lane stored per bounce,
-    gradient bytes per lane) of the scene's reverse kernel, read from its IR."""
+    gradient bytes per row) of the scene's reverse kernel, read from its IR."""
     scene.use_generic()
     scene.compile()
     spec = parameter_slots(scene.scene_spec, scene.build.model)[0]
@@ -81,8 +81,8 @@ def main() -> int:
             carried, taped, grad = adjoint_state(scene)
             print(f"adjoint of the bounce loop: {carried} bytes per lane carried (k, the "
                   f"adjoints of the carried values), {taped} bytes per lane per bounce "
-                  f"stored (no tape: the state is recomputed); gradient row: {grad} bytes "
-                  "per sample")
+                  f"stored (no tape: the state is recomputed); gradient rows: {grad} bytes "
+                  "each, 64 per thread")
         rows.append((depth, *measure(scene, args)))
     print(f"{'max_depth':>9} {'render s':>9} {'backward s':>10} {'bwd/render':>10} "
           f"{'fwd-mode s':>10} {'fwd/bwd':>8}")

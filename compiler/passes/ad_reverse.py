@@ -13,6 +13,9 @@ parameters and results, computed as before, and gets after its own parameters:
   d loss / d ``PRM[i]`` is *added* to ``gPRM[ad_row + i]``, so each lane (each sample) adds
   into a row of its own (no two lanes write one element: no atomics); the caller sums the
   rows;
+* likewise with the scene's texel buffer ``T`` (bitmap textures): ``gT`` and ``ad_row_T``
+  (the caller chooses rows so that no two lanes running at once share one: a texel is
+  read by many samples);
 * a ``Float`` argument ``x`` gets a result ``g.x`` after the kernel's own (a vector-Jacobian
   product), recorded in ``abi_params``/``abi_result`` as ``ad_forward`` records tangents.
 
@@ -51,6 +54,10 @@ from . import Pass, register
 from .ad_forward import PARAM_BUFFER
 
 GRAD_BUFFER, ROW = "gPRM", "ad_row"
+# the scene's texel buffer (runtime/render/textures.py): its loads are differentiated too,
+# into gT at row ad_row_T (d loss / d texel, for bitmap textures' ``<id>.data``)
+TEXEL_BUFFER = "T"
+DIFFERENTIATED = {PARAM_BUFFER: (GRAD_BUFFER, ROW), TEXEL_BUFFER: ("gT", "ad_row_T")}
 SWEEP = "ad.sweep"  # on the first instruction of a sweep that follows its forward part
 _NO_DERIVATIVE = {Op.FLOOR, Op.CEIL, Op.CAST, Op.BITCAST, Op.CONST, Op.LOAD, Op.REM}
 
@@ -69,11 +76,12 @@ class _Reverse:
 
     def __init__(self, fn: Function) -> None:
         self.fn = fn
-        self.prm: Value | None = next(
-            (p.value for p in fn.params if p.value.name == PARAM_BUFFER
-             and isinstance(p.value.type, BufferType)), None)
-        self.grad = Value(BufferType(F32), GRAD_BUFFER)
-        self.row = Value(I32, ROW)
+        # a differentiated buffer (PRM, T) -> its gradient buffer and row
+        self.bufs: dict[Value, tuple[Value, Value]] = {
+            p.value: (Value(BufferType(F32), DIFFERENTIATED[p.value.name][0]),
+                      Value(I32, DIFFERENTIATED[p.value.name][1]))
+            for p in fn.params if p.value.name in DIFFERENTIATED
+            and p.value.type == BufferType(F32)}
         self.varied: set[Value] = set()
         self.rules: dict[Value, tuple[list[Value], list[Value]]] = {}
         self.detached: set[Value] = set()  # the copies detach(x) made
@@ -109,14 +117,14 @@ class _Reverse:
         extra = [{"name": f"a_{n.replace('.', '_')}", "type": _F32_JSON, "uniform": False,
                   "default": None, "leaves": [p.value.name]} for (n, _), p in
                  zip(floats, seed_params)]
-        if self.prm is not None:
-            fn.params += [Param(self.grad, uniform=True), Param(self.row)]
+        for buf, (grad, row) in self.bufs.items():
+            fn.params += [Param(grad, uniform=True), Param(row)]
             entry = next((e for e in fn.attrs.get("abi_params", [])
-                          if e["name"] == PARAM_BUFFER), None)
+                          if e["name"] == buf.name), None)
             if entry is not None:
-                extra += [dict(entry, name=GRAD_BUFFER, leaves=[GRAD_BUFFER]),
-                          {"name": ROW, "type": {"kind": "scalar", "dtype": "i32"},
-                           "uniform": False, "default": None, "leaves": [ROW]}]
+                extra += [dict(entry, name=grad.name, leaves=[grad.name]),
+                          {"name": row.name, "type": {"kind": "scalar", "dtype": "i32"},
+                           "uniform": False, "default": None, "leaves": [row.name]}]
         fn.attrs["abi_params"] = [*fn.attrs.get("abi_params", []), *extra]
         if seeds:
             self._abi_results(seeds)
@@ -179,7 +187,7 @@ class _Reverse:
     def _varied_results(self, ins: Instr) -> list[Value]:
         op, V = ins.op, self.varied
         if op is Op.LOAD:
-            return [ins.result] if ins.operands[0] is self.prm and self.prm else []
+            return [ins.result] if ins.operands[0] in self.bufs else []
         if op is Op.IF:
             return [r for i, r in enumerate(ins.results) if r.type == F32 and any(
                 reg.instrs[-1].operands[i] in V for reg in ins.regions)]
@@ -419,11 +427,12 @@ class _Reverse:
         if y in self.detached:
             return
         if op is Op.LOAD:
-            if x[0] is self.prm:
+            if x[0] in self.bufs:
+                grad, row = self.bufs[x[0]]
                 idx = v[1] if v[1].type == I32 else b.op(Op.CAST, I32, v[1])
-                j = b.op(Op.ADD, I32, self.row, idx)
-                old = b.op(Op.LOAD, F32, self.grad, j)
-                b.emit(Op.STORE, [self.grad, j, b.op(Op.ADD, F32, old, a)], [])
+                j = b.op(Op.ADD, I32, row, idx)
+                old = b.op(Op.LOAD, F32, grad, j)
+                b.emit(Op.STORE, [grad, j, b.op(Op.ADD, F32, old, a)], [])
             return
         zero = None if op not in (Op.SQRT, Op.ABS, Op.MIN, Op.MAX, Op.SELECT) \
             else b.const(0.0, F32)

@@ -39,7 +39,9 @@ from typing import Union
 
 from ..ir import F32, PURE_OPS, Block, Builder, Function, Instr, Module, Op, Value, replace_uses
 from . import Pass, register
-from .ad_reverse import GRAD_BUFFER, SWEEP
+from .ad_reverse import DIFFERENTIATED, SWEEP
+
+GRADIENTS = {grad for grad, _ in DIFFERENTIATED.values()}  # gPRM, gT
 from .ad_tape import sweep_blocks
 
 DEFAULT_THRESHOLD = 10
@@ -126,7 +128,7 @@ class _Sweep:
                     self.defs.update((a, None) for a in ins.regions[0].args)
                     self.defs.update((r, ins) for i in ins.regions[0].walk()
                                      for r in i.results)
-            elif ins.op is Op.LOAD and ins.operands[0].name == GRAD_BUFFER:
+            elif ins.op is Op.LOAD and ins.operands[0].name in GRADIENTS:
                 self.adj.add(ins.result)
             elif any(v in self.adj for v in ins.operands) and ins.results \
                     and ins.results[0].type == F32:

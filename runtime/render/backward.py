@@ -6,12 +6,14 @@ render: the generic kernel built with ``ad="reverse"`` (compiler/passes/ad_rever
 Per batch of samples:
 
 1. the plain generic kernel gives each sample's film weights, and so each pixel's total
-   weight (the film divides by it: a pixel is sum w v / sum w);
+   weight (the film divides by it: a pixel is sum w v / sum w), or those the last
+   ``render()`` of the same samples kept (in the generic build);
 2. each sample's adjoint is then sum over the pixels it reaches of w * d_img / total
    weight, computed here (it only moves numbers between the image and the samples);
 3. the adjoint kernel recomputes the sample and sweeps it backwards, adding the gradient of
-   ``PRM`` into a row of ``gPRM`` of its own per sample (``ad_row``): no two lanes or threads
-   write one element, and the rows are summed at the end.
+   ``PRM`` into a row of ``gPRM`` (``ad_row``) and that of the texels ``T`` into a row of
+   ``gT`` (``ad_row_T``) of the sample's lane (:class:`_Parts`): no two lanes running at
+   once write one element, and the rows are summed at the end.
 
 The estimate is that of the same Monte Carlo render (same seed and spp), as
 ``render_forward``'s: the dot product of ``backward``'s gradient with a tangent equals that
@@ -20,14 +22,18 @@ of ``render_forward``'s derivative image with ``d_img`` (tests/test_ad_reverse.p
 
 from __future__ import annotations
 
+import os
+from concurrent.futures import ThreadPoolExecutor
+from functools import partial
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from ...compiler.build import elimination_threshold
 from ...compiler.diagnostics import CompileError
-from .differentiable import _lookup, ad_twin
-from .film import film_reach, film_uniforms
+from ...core.scene_spec import Slot
+from .differentiable import Texels, _lookup, ad_twin
+from .film import film_reach, film_uniforms, sample_weights
 
 if TYPE_CHECKING:
     from .renderer import Scene
@@ -76,13 +82,10 @@ def _taps(film: dict, n: int) -> tuple[np.ndarray, np.ndarray]:
     return pix, ok
 
 
-def _weights(out: dict, n: int, cells: int) -> tuple[np.ndarray, np.ndarray]:
-    """The samples' column and row filter weights, (samples per cell, cells, 2n+1) each
-    (a batch is sample-major: sample j is in cell j % cells)."""
-    m = 2 * n + 1
-    wx = np.stack([np.asarray(out[f"w{k}"], np.float32) for k in range(m)], -1)
-    wy = np.stack([np.asarray(out[f"w{m + k}"], np.float32) for k in range(m)], -1)
-    return wx.reshape(-1, cells, m), wy.reshape(-1, cells, m)
+LANES = 16  # the widest SIMD packet: lanes of one packet add gradients into rows of their
+# own (array position mod LANES), each part of the adjoint pass into LANES rows (_Parts)
+PARTS_PER_THREAD = 4
+CELLS_AT_ONCE = 2048
 
 
 # long: two passes over the batches, then the reduction
@@ -118,34 +121,114 @@ def backward(scene: Scene, d_img: Any, params: list[str], spp: int | None = None
     pix, ok = _taps(film, n)
     per_tap = np.zeros(pix.shape)
     outs = []
-    for j, rs in batches:  # 1. the film's total weight per pixel
-        out = plain["render_sample"](j, rs, *scene.buffers.args(), prm, threads=threads)
-        wx, wy = _weights(out, n, cells)
+    # the film weights of the samples: those the last render() of these samples kept (they
+    # depend on where each sample falls on the film, not on the parameters), or a plain pass
+    kept = getattr(scene, "film_weights", None)
+    kept = kept[1] if kept and kept[0] == (spp, seed) and kept[1] is not None and \
+        len(kept[1]) == len(batches) else None
+    scene.film_weights = None  # used once: its memory is free again
+    for b, (j, rs) in enumerate(batches):  # 1. the film's total weight per pixel
+        if kept is not None:
+            wx, wy = kept[b]
+        else:
+            out = plain["render_sample"](j, rs, *scene.buffers.args(), prm, threads=threads)
+            wx, wy = sample_weights(out, n, cells)
         outs.append((wx, wy))
-        per_tap += np.einsum("scr,scq->crq", wy, wx, dtype=np.float64)
+        # sum over the samples of wy wx^T, per cell: a batched matrix product
+        per_tap += np.matmul(wy.transpose(1, 2, 0), wx.transpose(1, 0, 2))
     h, w = film["crop_h"], film["crop_w"]
     weights = np.bincount(pix[ok], per_tap[ok], h * w).reshape(h, w)
     g = d / np.where(weights == 0, 1.0, weights)[..., None]
-    g_taps = np.where(ok[..., None], g.reshape(h * w, -1)[pix], 0.0)  # (cells, r, q, C)
+    # per cell, the taps' g as (columns, rows x channels), 0 outside the crop
+    g_qrx = g.astype(np.float32).reshape(h * w, -1)[pix.transpose(0, 2, 1)]
+    g_qrx *= ok.transpose(0, 2, 1)[..., None]
+    g_qrx = g_qrx.reshape(len(pix), pix.shape[2], -1)
     kernel = next(k for k in mod.manifest["kernels"] if k["name"] == "render_sample")
     names = [p["name"] for p in kernel["params"]]
-    total = np.zeros(prm.size, np.float64)
+    parts = _Parts(prm, scene.buffers.T, any(isinstance(c, Texels) for c in chosen.values()),
+                   threads)
+    uniform = {"gPRM": parts.gPRM, "gT": parts.gT}
     for (j, rs), (wx, wy) in zip(batches, outs):  # 2. and 3.
-        a = np.einsum("scr,scq,crqx->scx", wy, wx, g_taps.astype(np.float32),
-                      optimize=True).reshape(j.size, -1)
+        a = _sample_adjoints(wx, wy, g_qrx)
         seeds = {f"a_ret_value_{c}": a[:, i] for i, c in enumerate("xyz"[:a.shape[1]])}
         if a.shape[1] == 1:
             seeds = {"a_ret_value": a[:, 0]}
-        args = []
-        grad = np.zeros(j.size * prm.size, np.float32)
-        for name in names[names.index("PRM") + 1:]:
-            if name == "gPRM":
-                args.append(grad)
-            elif name == "ad_row":
-                args.append(j * np.int32(prm.size))
-            else:
-                args.append(seeds.get(name, np.zeros(j.size, np.float32)))
-        mod["render_sample"](j, rs, *scene.buffers.args(), prm, *args, threads=threads)
-        total += grad.reshape(j.size, prm.size).sum(0, dtype=np.float64)
-    return {name: total[s.offset:s.offset + s.size].astype(np.float32)
-            for name, s in chosen.items()}
+        varying = {"ad_row": parts.rows(j.size, prm.size), "ad_row_T":
+                   parts.rows(j.size, scene.buffers.T.size) if parts.texels else
+                   np.zeros(j.size, np.int32)} | seeds
+        head = [rs, *scene.buffers.args(), prm]
+        rest = [(uniform[x], False) if x in uniform else
+                (varying.get(x, np.zeros(j.size, np.float32)), True)
+                for x in names[names.index("PRM") + 1:]]
+        parts.run(partial(_adjoint_part, mod["render_sample"], j, head, rest), j.size)
+    return {name: parts.gradient(c) for name, c in chosen.items()}
+
+
+def _sample_adjoints(wx: np.ndarray, wy: np.ndarray, g_qrx: np.ndarray) -> np.ndarray:
+    """Each sample's adjoint, sum over the pixels it reaches of wy wx g (g: d_img over the
+    pixel's total weight, per cell as (columns, rows x channels)): (samples, channels).
+    Batched matrix products (numpy's einsum of the three took 3x as long)."""
+    s, cells, m = wx.shape
+    out = np.empty((s, cells, g_qrx.shape[2] // m), np.float32)
+    for lo in range(0, cells, CELLS_AT_ONCE):  # a few MB of temporaries at a time
+        hi = min(lo + CELLS_AT_ONCE, cells)
+        t = np.matmul(wx[:, lo:hi].transpose(1, 0, 2), g_qrx[lo:hi])  # (cells, s, m x C)
+        t = t.reshape(hi - lo, s, m, -1) * wy[:, lo:hi].transpose(1, 0, 2)[..., None]
+        out[:, lo:hi] = t.sum(2).transpose(1, 0, 2)
+    return out.reshape(s * cells, -1)
+
+
+def _adjoint_part(kernel, j: np.ndarray, head: list, rest: list, lo: int, hi: int) -> None:
+    """The adjoint kernel over samples [lo, hi) of a batch (``rest``: the adjoint's own
+    arguments and whether each is varying: those are sliced, the gradient buffers not)."""
+    kernel(j[lo:hi], *head, *[x[lo:hi] if varying else x for x, varying in rest], threads=1)
+
+
+class _Parts:
+    """The adjoint pass split into parts of whole packets, ``PARTS_PER_THREAD`` per thread
+    (so a slow thread holds up little), each with ``LANES`` rows of its own in each gradient
+    buffer: lane k of a packet adds into row k of its part, so no two lanes running at once
+    add into one element (no atomics), and the buffers stay small (parts x LANES rows, not
+    one per sample).  Without texel parameters ``gT`` is one row nobody reads (the adjoint
+    kernel writes it anyway)."""
+
+    def __init__(self, prm: np.ndarray, T: np.ndarray, texels: bool,
+                 threads: int | None) -> None:
+        self.threads = max(1, int(threads or os.cpu_count() or 1))
+        self.parts = 1 if self.threads == 1 else self.threads * PARTS_PER_THREAD
+        rows = self.parts * LANES
+        if rows * max(T.size if texels else 0, prm.size) >= 2 ** 31:
+            raise ValueError(f"texel gradients of {T.size} floats in {rows} rows exceed "
+                             "32-bit indices; use fewer threads")
+        self.texels = texels
+        self.gPRM = np.zeros(rows * prm.size, np.float32)
+        self.gT = np.zeros(rows * T.size if texels else T.size, np.float32)
+
+    def _bounds(self, n: int) -> list[tuple[int, int]]:
+        per = -(-n // self.parts)  # ceil: parts of whole packets
+        step = -(-per // LANES) * LANES
+        return [(lo, min(lo + step, n)) for lo in range(0, n, step)]
+
+    def rows(self, n: int, size: int) -> np.ndarray:
+        """The first element of each sample's row, in a buffer of rows of ``size``."""
+        rows = np.empty(n, np.int32)
+        for p, (lo, hi) in enumerate(self._bounds(n)):
+            rows[lo:hi] = (p * LANES + np.arange(hi - lo) % LANES) * size
+        return rows
+
+    def run(self, call, n: int) -> None:
+        """``call(lo, hi)`` over the parts of [0, n), on ``threads`` threads."""
+        if self.parts == 1:
+            call(0, n)
+            return
+        with ThreadPoolExecutor(self.threads) as pool:
+            for f in [pool.submit(call, lo, hi) for lo, hi in self._bounds(n)]:
+                f.result()
+
+    def gradient(self, chosen: Slot | Texels) -> np.ndarray:
+        if isinstance(chosen, Texels):
+            total = self.gT.reshape(self.parts * LANES, -1).sum(0, dtype=np.float64)
+            g = sum(total[off:off + chosen.size] / scale for off, scale in chosen.copies)
+            return np.asarray(g, np.float32).reshape(chosen.shape)
+        total = self.gPRM.reshape(self.parts * LANES, -1).sum(0, dtype=np.float64)
+        return total[chosen.offset:chosen.offset + chosen.size].astype(np.float32)

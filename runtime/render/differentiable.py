@@ -3,7 +3,10 @@
 ``scene.params`` maps names to numpy arrays, named as Mitsuba 3's ``mi.traverse`` names
 them: ``red.reflectance.value`` (a BSDF's ``reflectance``, the BSDF's id first),
 ``light.emitter.radiance.value`` (the area emitter of the shape ``light``),
-``path.max_depth``.  The names without the trailing ``.value`` are accepted too.  Reading
+``path.max_depth``, and ``<id>.data`` for the texels of a bitmap texture that has an id (an
+(H, W, 3) array of linear RGB, in the ``rgb`` and ``mono`` variants).  The names without the
+trailing ``.value`` are accepted too.  Texels live in the texel buffer ``T``, which every
+build reads at run time: assigning them changes the next render without compiling.  Reading
 gives the value the scene has; assigning one switches the scene to the generic build
 (parameters read at run time from its buffer ``PRM``: docs/renderer.md), once, so the next
 render uses it without compiling again.
@@ -24,6 +27,7 @@ upsampling coefficients, whose derivatives are not offered yet (a clear error).
 from __future__ import annotations
 
 from collections.abc import Iterator, MutableMapping
+from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -32,7 +36,8 @@ from ...compiler.build import Build
 from ...compiler.diagnostics import CompileError
 from ...compiler.ir import ScalarType
 from ...compiler.passes.specialize import parameter_slots
-from ...core.scene_spec import SceneSpec, Slot
+from ...core.color import ColorModel
+from ...core.scene_spec import Instance, SceneSpec, Slot
 
 if TYPE_CHECKING:
     from .renderer import Scene
@@ -54,11 +59,39 @@ def param_slots(spec: SceneSpec) -> dict[str, Slot]:
     return out
 
 
+@dataclass(frozen=True)
+class Texels:
+    """A bitmap's texels in ``T``: each copy's first float and the scale it is stored
+    divided by (a texture that sets a colour and a Float parameter has two copies)."""
+
+    copies: tuple[tuple[int, float], ...]
+    shape: tuple[int, int, int]
+
+    @property
+    def size(self) -> int:
+        return self.shape[0] * self.shape[1] * self.shape[2]
+
+
+def texel_params(textures: list[Instance], model: ColorModel) -> dict[str, Texels]:
+    """``<id>.data`` -> the texels of each bitmap texture with an id (colours are stored as
+    linear RGB in ``mono`` and ``rgb``; the spectral variants store coefficients: none)."""
+    out: dict[str, tuple[list[tuple[int, float]], tuple[int, int, int]]] = {}
+    if model.spectral:
+        return {}
+    for t in textures:
+        if t.plugin != "bitmap" or t.name in (None, "bitmap"):
+            continue
+        p = t.params
+        copies, _ = out.setdefault(f"{t.name}.data", ([], (p["height"], p["width"], 3)))
+        copies.append((3 * p["offset"], float(p.get("scale", 1.0))))
+    return {k: Texels(tuple(c), s) for k, (c, s) in out.items()}
+
+
 def _lookup(slots: dict[str, Slot], name: str) -> tuple[str, Slot]:
     key = name[:-len(".value")] if name.endswith(".value") and name not in slots else name
     if key not in slots:
-        valid = ", ".join(f"{n}.value" if not n.startswith(("path.", "direct.")) else n
-                          for n in slots)
+        valid = ", ".join(n if n.startswith(("path.", "direct.")) or n.endswith(".data")
+                          else f"{n}.value" for n in slots)
         raise CompileError(f"the scene has no parameter `{name}` (its parameters: "
                            f"{valid or 'none'})")
     return key, slots[key]
@@ -74,20 +107,39 @@ class SceneParams(MutableMapping):
         self.slots = param_slots(generic)
         if scene.build.model.spectral:
             self.slots = {k: s for k, s in self.slots.items() if s.size == 1}
+        self.texels = texel_params(scene.buffers.textures, scene.build.model)
+        self.slots.update(self.texels)  # for _lookup's names; read and set below
 
     def __getitem__(self, name: str) -> np.ndarray:
-        _, slot = _lookup(self.slots, name)
+        key, slot = _lookup(self.slots, name)
+        if key in self.texels:
+            off, scale = self.texels[key].copies[0]
+            flat = self.scene.buffers.T[off:off + slot.size] * np.float32(scale)
+            return flat.reshape(self.texels[key].shape)
         buf = self.scene.prm if self.scene._prm_set else self.values
         return np.array(buf[slot.offset:slot.offset + slot.size])
 
     def __setitem__(self, name: str, value: Any) -> None:
-        _, slot = _lookup(self.slots, name)
+        key, slot = _lookup(self.slots, name)
+        if key in self.texels:
+            self._set_texels(name, self.texels[key], value)
+            return
         v = np.asarray(value, np.float32).reshape(-1)
         if v.size not in (1, slot.size):
             raise ValueError(f"`{name}` holds {slot.size} value(s); got an array of {v.size}")
         self.scene.use_generic()
         _check_tables(self.scene, name)
         self.scene.prm[slot.offset:slot.offset + slot.size] = v
+
+    def _set_texels(self, name: str, texels: Texels, value: Any) -> None:
+        v = np.asarray(value, np.float32)
+        if v.shape != texels.shape and v.size not in (1, texels.size):
+            raise ValueError(f"`{name}` holds texels of shape {texels.shape}; got an array "
+                             f"of shape {v.shape}")
+        flat = np.broadcast_to(v.reshape(-1), texels.size)
+        T = self.scene.buffers.T
+        for off, scale in texels.copies:  # in place: every build reads T at run time
+            T[off:off + texels.size] = flat / np.float32(scale)
 
     def __delitem__(self, name: str) -> None:
         raise TypeError("scene parameters cannot be deleted")
@@ -153,6 +205,9 @@ def render_forward(scene: Scene, name: str, spp: int | None = None, seed: int | 
                            "`rgb` or `mono`")
     params = scene.params  # validates the name before anything compiles
     key, slot = _lookup(params.slots, name)
+    if key in params.texels:
+        raise CompileError(f"`{name}`: forward derivatives with respect to texels are not "
+                           "offered (one render per texel); use scene.backward")
     t = np.ones(slot.size, np.float32) if tangent is None else \
         np.asarray(tangent, np.float32).reshape(-1)
     if t.size not in (1, slot.size):

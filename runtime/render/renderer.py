@@ -40,7 +40,7 @@ from .bsdfs import (
 from .bvh import scene_bvh
 from .differentiable import SceneParams, gradient, render_forward
 from .emitters import KINDS as EMITTER_KINDS
-from .film import develop, film_uniforms, new_accumulator
+from .film import develop, film_reach, film_uniforms, new_accumulator, sample_weights
 from .flatten import SceneBuffers, flatten
 from .integrators import integrator_instances, integrator_plan
 from .kernel_source import kernel_source, scene_plugins
@@ -352,6 +352,7 @@ class Scene:
         seed_bits = int(np.uint32(seed).view(np.int32))
         waiting = None  # (samples, n) of the rendered batch the film has not taken yet
         done = k = 0
+        keep = [] if self._prm_set and not self.derivative else None  # weights, for backward
         while done < spp or waiting is not None:
             job = None
             if done < spp:
@@ -368,6 +369,8 @@ class Scene:
                 mod["film_pass"](pixels, np.array([m, ns], np.int32), _film_samples(prev, ns),
                                  acc, threads=threads)
                 self.nonfinite += int(np.count_nonzero(prev["bad"]))
+                if keep is not None:
+                    keep.append(sample_weights(prev, film_reach(film), cells))
                 bar.update(done)
             waiting = None
             if job is not None:
@@ -379,6 +382,7 @@ class Scene:
                     bar.finish()
                     raise RenderCancelled(f"cancelled after {done} of {spp} spp")
         bar.finish()
+        self.film_weights = ((spp, seed), keep)
         return develop(acc.get() if hasattr(acc, "get") else acc, dict(film, spp=spp))
 
     def _scene_args(self, mod: Any) -> list[Any]:
@@ -443,8 +447,6 @@ def load_dict(scene: dict, variant: str | ColorModel = "rgb", target: str | Targ
     """Load a scene given as Mitsuba 3's Python dictionary (``mi.load_dict``'s format):
     written out as XML (runtime/scene/dicts.py) under the kernel cache and loaded as
     :func:`load_scene` loads a file, user plugins found in the current folder first."""
-    import hashlib as _hashlib
-
     from ..cache import cache_dir
     from ..plugins import PluginRegistry
     from ..scene.dicts import dict_to_xml
@@ -454,7 +456,7 @@ def load_dict(scene: dict, variant: str | ColorModel = "rgb", target: str | Targ
     text = dict_to_xml(scene, PluginRegistry.for_scene(None, places))
     folder = cache_dir() / "dicts"
     folder.mkdir(parents=True, exist_ok=True)
-    path = folder / f"{_hashlib.sha256(text.encode()).hexdigest()[:20]}.xml"
+    path = folder / f"{hashlib.sha256(text.encode()).hexdigest()[:20]}.xml"
     if not path.is_file():
         tmp = path.with_suffix(f".{os.getpid()}.tmp")
         tmp.write_text(text)
