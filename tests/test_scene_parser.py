@@ -486,6 +486,22 @@ def test_matrix_and_lookat(tmp_path: Path) -> None:
     np.testing.assert_allclose(m[:3, :3].T @ m[:3, :3], np.eye(3), atol=1e-12)
 
 
+@pytest.mark.parametrize("origin,target", [((0, 0.5, 4), (0, 0, 0)), ((2.5, 1, 3), (0.5, 0, 0)),
+                                           ((0, 0, 0), (0, 0, 1)), ((0, 0, 0), (1, 2, 3)),
+                                           ((0, 0, 0), (0, -5, 0))])
+def test_lookat_without_up_is_mitsubas(origin, target) -> None:
+    """A <lookat> without `up` gets the frame Mitsuba 3's parser gives it (the first vector
+    of coordinate_system(dir) as up): a spot light's projected texture turns with it."""
+    mi = pytest.importorskip("mitsuba")
+    mi.set_variant("scalar_rgb")
+    o, t = ", ".join(map(str, origin)), ", ".join(map(str, target))
+    scene = mi.load_string(f'<scene version="3.0.0"><sensor type="perspective"><transform '
+                           f'name="to_world"><lookat origin="{o}" target="{t}"/></transform>'
+                           '</sensor></scene>')
+    theirs = np.array(scene.sensors()[0].world_transform().matrix, np.float64)
+    np.testing.assert_allclose(xf.look_at(origin, target), theirs, atol=1e-6)
+
+
 # ---------------------------------------------------------------------------------------
 # Spectra
 
