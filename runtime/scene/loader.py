@@ -47,7 +47,7 @@ from .schema import (
     plugin_types,
 )
 from .sensors import METERS, attach_meter, finish_sensor, top_level_sensor
-from .spectra import Color, as_reflectance, conductor_ior, lookup_ior
+from .spectra import Color, as_reflectance, conductor_ior, flat_emission, lookup_ior
 from .xml import Child, ObjectNode, Prop, SceneTree, read_scene
 
 # the largest Cauchy B term accepted (um^2): glasses are below 0.02, so a larger value is a
@@ -321,6 +321,8 @@ class _Builder:
                                   f"got {value.rgb[0]:g}", loc)
             if node.category != "emitter" and value.wavelengths is not None:
                 return as_reflectance(value, name)  # seen under D65, as Mitsuba's
+            if node.category == "emitter" and kind == "spectrum" and value.wavelengths is None:
+                return flat_emission(value.rgb[0])  # a flat spectrum, not a grey
             return value
         if p.kind == "ior":
             ior = lookup_ior(value, loc) if kind == "string" else float(value)

@@ -84,6 +84,15 @@ def as_reflectance(color: Color, name: str) -> Color:
     return Color((float(rgb[0]), float(rgb[1]), float(rgb[2])), color.wavelengths, color.values)
 
 
+def flat_emission(value: float) -> Color:
+    """``<spectrum value="v">`` setting an emitter's radiance: the flat spectrum v, as
+    Mitsuba 3 takes it (its rgb variants see v times the equal-energy white's linear sRGB,
+    about (1.2, 0.95, 0.91) v, not the grey v; its spectral variants v at every wavelength,
+    without D65)."""
+    wl, vals = (360.0, 830.0), (float(value), float(value))
+    return Color(spectrum_to_srgb(wl, vals, bounded=False), wl, vals)
+
+
 def parse_float(tok: str, what: str, loc: Loc) -> float:
     """``float(tok)`` (a ValueError if it is no number), which must fit the kernels' 32-bit
     Float: a finite number that would become infinity there is an error at ``loc``."""
