@@ -31,7 +31,8 @@ TRIM = 0.02        # the fraction of largest squared errors a tile's RMSE leaves
 class Case:
     """One tile: ``xml`` is a ``<bsdf>`` (put on the sheet's object) unless ``shape`` is
     false, when it is the tile's whole object with ``{T}`` for its ``to_world`` (a unit
-    object placed in its tile; ``{X}``, ``{Y}`` its centre).  ``xfail``: the reason, with measured numbers, it differs."""
+    object placed in its tile; ``{X}``, ``{Y}`` its centre).  ``xfail``: the reason, with
+    measured numbers, it differs."""
 
     name: str
     xml: str
