@@ -319,11 +319,9 @@ class _Builder:
             if min(value.rgb) < 0:  # a single negative value is kept for angles (fconst)
                 raise scene_error(f"<{kind} name=\"{name}\">: a color must be non-negative, "
                                   f"got {value.rgb[0]:g}", loc)
-            if node.category != "emitter" and value.wavelengths is not None:
-                return as_reflectance(value, name)  # seen under D65, as Mitsuba's
-            if node.category == "emitter" and kind == "spectrum" and value.wavelengths is None:
-                return flat_emission(value.rgb[0])  # a flat spectrum, not a grey
-            return value
+            if node.category == "emitter":  # a constant <spectrum>: flat, not grey
+                return flat_emission(value) if kind == "spectrum" else value
+            return as_reflectance(value, name)  # pairs seen under D65, as Mitsuba's
         if p.kind == "ior":
             ior = lookup_ior(value, loc) if kind == "string" else float(value)
             if ior < 0:
