@@ -17,7 +17,9 @@ pytest.importorskip("rdsl.runtime.embree")
 def _params():
     for sh in SHEETS:
         for c in sh.cases:
-            marks = [pytest.mark.xfail(strict=True, reason=c.xfail)] if c.xfail else []
+            # one sheet, one worker under `pytest -n N --dist loadgroup` (a sheet renders once)
+            marks = [pytest.mark.xdist_group(sh.name)]
+            marks += [pytest.mark.xfail(strict=True, reason=c.xfail)] if c.xfail else []
             yield pytest.param(sh.name, c.name, marks=marks, id=c.name)
 
 
