@@ -380,7 +380,11 @@ def test_path_element_and_nested_objects(tmp_path: Path) -> None:
     assert tex["filter_type"] == "nearest" and tex["wrap_mode"] == "repeat"
     np.testing.assert_allclose(np.diag(tex["to_uv"]), [2, 3, 1, 1])
     assert tex["filename"] == str(tmp_path / "img.png")
-    assert sh.emitter["radiance"].rgb == (2.0, 2.0, 2.0) and s.emitters == [sh.emitter]
+    # a constant <spectrum> radiance is the flat spectrum: Mitsuba 3's scalar_rgb loads it as
+    # 2 x (1.204794, 0.948291, 0.908916), the equal-energy white, not as grey 2
+    np.testing.assert_allclose(sh.emitter["radiance"].rgb, [2.409588, 1.896582, 1.817832],
+                               rtol=1e-3)
+    assert s.emitters == [sh.emitter]
 
 
 def test_bsdf_parameters_resolved(tmp_path: Path) -> None:
@@ -485,6 +489,22 @@ def test_matrix_and_lookat(tmp_path: Path) -> None:
     m = xf.look_at([0, 0, 0], [0, -5, 0])  # no up given: any perpendicular frame
     np.testing.assert_allclose(m[:3, 2], [0, -1, 0])
     np.testing.assert_allclose(m[:3, :3].T @ m[:3, :3], np.eye(3), atol=1e-12)
+
+
+@pytest.mark.parametrize("origin,target", [((0, 0.5, 4), (0, 0, 0)), ((2.5, 1, 3), (0.5, 0, 0)),
+                                           ((0, 0, 0), (0, 0, 1)), ((0, 0, 0), (1, 2, 3)),
+                                           ((0, 0, 0), (0, -5, 0))])
+def test_lookat_without_up_is_mitsubas(origin, target) -> None:
+    """A <lookat> without `up` gets the frame Mitsuba 3's parser gives it (the first vector
+    of coordinate_system(dir) as up): a spot light's projected texture turns with it."""
+    mi = pytest.importorskip("mitsuba")
+    mi.set_variant("scalar_rgb")
+    o, t = ", ".join(map(str, origin)), ", ".join(map(str, target))
+    scene = mi.load_string(f'<scene version="3.0.0"><sensor type="perspective"><transform '
+                           f'name="to_world"><lookat origin="{o}" target="{t}"/></transform>'
+                           '</sensor></scene>')
+    theirs = np.array(scene.sensors()[0].world_transform().matrix, np.float64)
+    np.testing.assert_allclose(xf.look_at(origin, target), theirs, atol=1e-6)
 
 
 # ---------------------------------------------------------------------------------------

@@ -151,6 +151,9 @@ def leaf_instance(plugin: Any, textures: Any = None) -> Instance:
     ours = plugin_params(plugin.type)
     p = dict(plugin.params)
     p.pop("material", None)  # resolved into eta / k
+    # sampling only: the image converges to the same either way (rdsl always samples the
+    # visible normals)
+    p.pop("sample_visible", None)
     if "int_ior" in p:
         p.pop("eta", None)   # derived: int_ior / ext_ior
     if p.get("distribution") is not None:

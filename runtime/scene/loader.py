@@ -44,7 +44,7 @@ from .schema import (
 )
 from .sensors import top_level_sensor
 from .shape_build import ShapeFinisher, drawn_shapes, shape_points
-from .spectra import Color, as_reflectance, lookup_ior
+from .spectra import Color, as_reflectance, flat_emission, lookup_ior
 from .xml import Child, ObjectNode, Prop, SceneTree, read_scene
 
 
@@ -316,9 +316,9 @@ class _Builder(ShapeFinisher, Finishers):
             if min(value.rgb) < 0:  # a single negative value is kept for angles (fconst)
                 raise scene_error(f"<{kind} name=\"{name}\">: a color must be non-negative, "
                                   f"got {value.rgb[0]:g}", loc)
-            if node.category != "emitter" and value.wavelengths is not None:
-                return as_reflectance(value, name)  # seen under D65, as Mitsuba's
-            return value
+            if node.category == "emitter":  # a constant <spectrum>: flat, not grey
+                return flat_emission(value) if kind == "spectrum" else value
+            return as_reflectance(value, name)  # pairs seen under D65, as Mitsuba's
         if p.kind == "ior":
             ior = lookup_ior(value, loc) if kind == "string" else float(value)
             if ior < 0:

@@ -122,23 +122,27 @@ def rectangle() -> Mesh:
 
 
 def cube() -> Mesh:
-    """Mitsuba's ``cube``: [-1, 1]^3, 24 vertices and 12 triangles with outward normals."""
-    verts, norms, uvs, faces = [], [], [], []
-    for axis in range(3):
-        for sign in (-1.0, 1.0):
-            n = np.zeros(3)
-            n[axis] = sign
-            a1, a2 = (axis + 1) % 3, (axis + 2) % 3
-            u_dir, v_dir = np.eye(3)[a1], np.eye(3)[a2]
-            if sign < 0:
-                u_dir, v_dir = v_dir, u_dir
-            base = len(verts)
-            for su, sv in ((-1, -1), (1, -1), (1, 1), (-1, 1)):
-                verts.append(n + su * u_dir + sv * v_dir)
-                norms.append(n)
-                uvs.append(((su + 1) / 2, (sv + 1) / 2))
-            faces += [(base, base + 1, base + 2), (base + 2, base + 3, base)]
-    return Mesh(np.array(verts), np.array(faces), np.array(norms), np.array(uvs))
+    """Mitsuba's ``cube``: [-1, 1]^3, 24 vertices and 12 triangles with outward normals, in
+    Mitsuba 3's order, with its uvs (a texture lands on each face as in Mitsuba's)."""
+    # per face: its normal's axis and sign, then its four corners as Mitsuba's table lists
+    # them, with uvs (0, 1) (1, 1) (1, 0) (0, 0) and triangles (0 1 2) (3 0 2)
+    table = ((1, -1.0, ((1, -1, -1), (1, -1, 1), (-1, -1, 1), (-1, -1, -1))),
+             (1, 1.0, ((1, 1, -1), (-1, 1, -1), (-1, 1, 1), (1, 1, 1))),
+             (0, 1.0, ((1, -1, -1), (1, 1, -1), (1, 1, 1), (1, -1, 1))),
+             (2, 1.0, ((1, -1, 1), (1, 1, 1), (-1, 1, 1), (-1, -1, 1))),
+             (0, -1.0, ((-1, -1, 1), (-1, 1, 1), (-1, 1, -1), (-1, -1, -1))),
+             (2, -1.0, ((1, 1, -1), (1, -1, -1), (-1, -1, -1), (-1, 1, -1))))
+    verts, norms, faces = [], [], []
+    for axis, sign, corners in table:
+        n = np.zeros(3)
+        n[axis] = sign
+        base = len(verts)
+        verts += corners
+        norms += [n] * 4
+        faces += [(base, base + 1, base + 2), (base + 3, base, base + 2)]
+    uvs = [(0, 1), (1, 1), (1, 0), (0, 0)] * 6
+    return Mesh(np.array(verts, np.float64), np.array(faces), np.array(norms), np.array(uvs,
+                                                                                      np.float64))
 
 
 def disk(segments: int = 96) -> Mesh:

@@ -77,11 +77,25 @@ UNBOUNDED = ("eta", "k")
 def as_reflectance(color: Color, name: str) -> Color:
     """Wavelength:value pairs (or an .spd file) that set ``name`` outside an emitter, as
     Mitsuba 3's rgb variants take them: seen under D65 and clamped to [0, 1] (``eta`` and
-    ``k`` only at 0).  The pairs stay for the spectral variants."""
+    ``k`` only at 0).  The pairs stay for the spectral variants; a colour without pairs is
+    returned as it is."""
+    if color.wavelengths is None:
+        return color
     wl, v = np.asarray(color.wavelengths, np.float64), np.asarray(color.values, np.float64)
     rgb = (spectral.spectrum_to_rgb_unbounded(wl, v) if name in UNBOUNDED
            else spectral.spectrum_to_rgb_reflectance(wl, v))
     return Color((float(rgb[0]), float(rgb[1]), float(rgb[2])), color.wavelengths, color.values)
+
+
+def flat_emission(color: Color) -> Color:
+    """A ``<spectrum>`` setting an emitter's radiance: pairs as they are; a constant v is the
+    flat spectrum v, as Mitsuba 3 takes it (its rgb variants see v times the equal-energy
+    white's linear sRGB, about (1.2, 0.95, 0.91) v, not the grey v; its spectral variants v at
+    every wavelength, without D65)."""
+    if color.wavelengths is not None:
+        return color
+    wl, vals = (360.0, 830.0), (float(color.rgb[0]), float(color.rgb[0]))
+    return Color(spectrum_to_srgb(wl, vals, bounded=False), wl, vals)
 
 
 def parse_float(tok: str, what: str, loc: Loc) -> float:

@@ -65,11 +65,13 @@ def look_at(origin, target, up=None) -> np.ndarray:
 
 
 def _any_perpendicular(n: np.ndarray) -> np.ndarray:
-    # Duff et al. 2017 orthonormal basis, as Mitsuba's coordinate_system()
+    # the first vector of Mitsuba's coordinate_system(n) (Duff et al. 2017), the up vector
+    # its parser gives a <lookat> without one (the second one rotated a spot light's
+    # projected texture by 90 degrees against Mitsuba's)
     sign = math.copysign(1.0, n[2])
     a = -1.0 / (sign + n[2])
     b = n[0] * n[1] * a
-    return np.array([b, sign + n[1] * n[1] * a, -n[1]])
+    return np.array([1.0 + sign * n[0] * n[0] * a, sign * b, -sign * n[0]])
 
 
 def from_values(values: list[float]) -> np.ndarray:
