@@ -92,6 +92,26 @@ def _atan_weight(t):
     return 2.0**24 * u * t * np.maximum(1 / np.arctan(u), 1 / (np.pi / 4 - np.arctan(u)))
 
 
+def _erfcx(y):
+    from scipy.special import erfcx
+
+    return erfcx(y)
+
+
+def _erf_piece(c):
+    """erf(c + s) = e0 + d1 s + s G(s) with e0 = erf(c) and d1 the float32 erf'(c)."""
+    from scipy.special import erf
+
+    d1 = float(np.float32(2 / np.sqrt(np.pi) * np.exp(-c * c)))
+    e0 = float(erf(c))
+
+    def g(s):
+        s = np.where(s == 0, 1e-12, s)
+        return (erf(c + s) - e0 - d1 * s) / s
+
+    return g, (lambda s: 2.0**24 * np.abs(s) / erf(c + s))
+
+
 FITS = {
     # tan r = r + r^3 P(r^2), |r| <= pi/4 (+ the slack of the rounded reduction)
     "tan": Fit("tan", 1e-6, 0.7854**2, 6, _tan_tail,
@@ -99,6 +119,12 @@ FITS = {
     # asin w = w + w^3 P(w^2), |w| <= 1/2
     # atan u = u + u^3 P(u^2), |u| <= 1/2
     "atan": Fit("atan", 1e-6, 0.25, 5, _atan_tail, _atan_weight),
+    # erf(c + s), |s| <= 1/4, on [1/2, 1] (c = 3/4) and [1, 3/2] (c = 5/4)
+    "erf075": Fit("erf075", -0.25, 0.25, 6, *_erf_piece(0.75)),
+    "erf125": Fit("erf125", -0.25, 0.25, 6, *_erf_piece(1.25)),
+    # erfcx(2.75 + s) = e^(y^2) erfc(y), y in [3/2, 4] (erfinv's Newton step)
+    "erfcx": Fit("erfcx", -1.25, 1.25, 10, lambda s: _erfcx(2.75 + s),
+                 lambda s: 2.0**24 / _erfcx(2.75 + s)),
     "asin": Fit("asin", 1e-6, 0.25, 5, _asin_tail, _asin_weight),
 }
 

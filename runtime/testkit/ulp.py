@@ -71,8 +71,8 @@ UNARY = [
     Unary("log2", np.log2, 0.0, F32_MAX, 1.0),
     Unary("sqrt", np.sqrt, 0.0, F32_MAX, 0.5),
     Unary("rsqrt", lambda x: 1.0 / np.sqrt(x), 0.0, F32_MAX, 1.0),
-    Unary("erf", _erf, -F32_MAX, F32_MAX, 1.5),
-    Unary("erfinv", _erfinv, -1.0, 1.0, 4.0),
+    Unary("erf", _erf, -F32_MAX, F32_MAX, 1.0),
+    Unary("erfinv", _erfinv, -1.0, 1.0, 1.0),
 ]
 BOUNDS = {u.name: u.bound for u in UNARY}
 
