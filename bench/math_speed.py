@@ -18,8 +18,8 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
-import rdsl  # noqa: E402
-from rdsl.runtime.testkit.ulp import UNARY, wrappers  # noqa: E402
+import rdsl
+from rdsl.runtime.testkit.ulp import UNARY, wrappers
 
 
 def inputs(fn, n: int, rng) -> np.ndarray:
