@@ -14,8 +14,8 @@ where numpy's float64 functions are not accurate enough (erfinv's tail).
 from __future__ import annotations
 
 import sys
-from dataclasses import dataclass
 from collections.abc import Callable
+from dataclasses import dataclass
 
 import numpy as np
 
