@@ -5,6 +5,35 @@
 #include <stdint.h>
 #include <string.h>
 
+/* erfinv in float64: Giles' approximation as a seed, then Newton steps on erf(y) = |x|
+   (through erfc(y) = 1 - |x| past 1/2, where 1 - |x| is exact) until they stop moving. */
+static double erfinv(double x) {
+    double a = fabs(x);
+    if (!(a <= 1.0)) return NAN;
+    if (a == 1.0) return copysign(INFINITY, x);
+    if (a == 0.0) return x;
+    double w = -log((1.0 - a) * (1.0 + a)), y;
+    if (w < 5.0) {
+        w -= 2.5;
+        y = 2.81022636e-8;
+        const double c[] = {3.43273939e-7, -3.5233877e-6, -4.39150654e-6, 2.1858087e-4,
+                            -1.25372503e-3, -4.17768164e-3, 0.246640727, 1.50140941};
+        for (int k = 0; k < 8; k++) y = y * w + c[k];
+    } else {
+        w = sqrt(w) - 3.0;
+        y = -2.00214257e-4;
+        const double c[] = {1.00950558e-4, 1.34934322e-3, -3.67342844e-3, 5.73950773e-3,
+                            -7.6224613e-3, 9.43887047e-3, 1.00167406, 2.83297682};
+        for (int k = 0; k < 8; k++) y = y * w + c[k];
+    }
+    y *= a;
+    for (int k = 0; k < 6; k++) {
+        double r = a <= 0.5 ? erf(y) - a : (1.0 - a) - erfc(y);
+        y -= r / (1.1283791670955126 * exp(-y * y));
+    }
+    return copysign(y, x);
+}
+
 static double truth(int fn, double x) {
     switch (fn) {
     case 0: return sin(x);   case 1: return cos(x);   case 2: return tan(x);
@@ -12,6 +41,7 @@ static double truth(int fn, double x) {
     case 6: return exp(x);   case 7: return exp2(x);  case 8: return log(x);
     case 9: return log2(x);  case 10: return sqrt(x); case 11: return 1.0 / sqrt(x);
     case 12: return erf(x);
+    case 13: return erfinv(x);
     default: return NAN;
     }
 }
