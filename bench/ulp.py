@@ -3,6 +3,7 @@
     python bench/ulp.py                       # sampled: 2^22 patterns per function
     python bench/ulp.py --exhaustive          # every one of the 2^32 float32 inputs
     python bench/ulp.py --targets scalar,avx2 --functions sin,tan
+    python bench/ulp.py --exhaustive --functions asin --bits 0:80000000   # x >= +0 only
 
 For each function of ``runtime/testkit/ulp.py``'s table and each target, the kernel
 ``k_NAME(x) = NAME(x)`` is compiled and run over float32 bit patterns (all of them with
@@ -98,10 +99,12 @@ def sweep(kernel, fn, patterns) -> dict:
             "special": bad_special}
 
 
-def patterns(exhaustive: bool, samples: int, seed: int):
+def patterns(exhaustive: bool, samples: int, seed: int, bits: str = "0:100000000"):
     if exhaustive:
-        for start in range(0, 1 << 32, CHUNK):
-            yield float32_chunk(start, CHUNK)
+        for span in bits.split(","):
+            lo, hi = (int(b, 16) for b in span.split(":"))
+            for start in range(lo, hi, CHUNK):
+                yield float32_chunk(start, min(CHUNK, hi - start))
         return
     rng = np.random.default_rng(seed)
     bits = rng.integers(0, 1 << 32, samples, dtype=np.uint64).astype(np.uint32)
@@ -115,6 +118,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--targets", default="scalar,host")
     ap.add_argument("--functions", default=",".join(u.name for u in UNARY))
     ap.add_argument("--exhaustive", action="store_true", help="all 2^32 inputs")
+    ap.add_argument("--bits", default="0:100000000",
+                    help="with --exhaustive: the bit patterns swept, hex ranges LO:HI (HI "
+                         "excluded), comma-separated; 0:80000000 is every x >= +0")
     ap.add_argument("--samples", type=int, default=1 << 22)
     ap.add_argument("--seed", type=int, default=1)
     ap.add_argument("--numpy", action="store_true",
@@ -125,7 +131,8 @@ def main(argv: list[str] | None = None) -> int:
     if unknown:
         ap.error(f"unknown function(s): {', '.join(sorted(unknown))}")
     src = wrappers([u.name for u in chosen])
-    mode = "all 2^32 inputs" if args.exhaustive else f"{args.samples} sampled bit patterns"
+    mode = (("all 2^32 inputs" if args.bits == "0:100000000" else f"all bit patterns {args.bits}")
+            if args.exhaustive else f"{args.samples} sampled bit patterns")
     print(f"ulp errors against float64, {mode}\n")
     print(f"| function | target | domain | max ulp | mean ulp | worst input | bound | "
           f"special mismatches | seconds |")
@@ -136,7 +143,7 @@ def main(argv: list[str] | None = None) -> int:
         mod = rdsl.jit(src, target=target)
         for fn in chosen:
             t0 = time.perf_counter()
-            pats = patterns(args.exhaustive, args.samples, args.seed)
+            pats = patterns(args.exhaustive, args.samples, args.seed, args.bits)
             r = (sweep_native(native, mod[f"k_{fn.name}"], fn, pats) if native is not None
                  else sweep(mod[f"k_{fn.name}"], fn, pats))
             dt = time.perf_counter() - t0

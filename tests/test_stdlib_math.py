@@ -313,3 +313,15 @@ def test_docs_math_md_states_the_bounds_the_code_asserts():
             continue  # a builtin (IEEE) and a one-line helper, no comment to check
         doc = re.search(r"///([^\n]*\n///)*[^\n]*\n(?:///[^\n]*\n)*fn %s\(" % name, stdlib)
         assert doc and f"max error {bound:g} ulp" in doc.group(0), name
+
+
+@pytest.mark.parametrize("name", ["asin", "atan", "erf", "erfinv"])
+def test_odd_functions_are_odd_bit_for_bit(mod, name):
+    """f(-x) == -f(x) exactly (the sign is applied last), so an exhaustive sweep of x >= +0
+    (bench/ulp.py --bits 0:80000000) covers the negative half too."""
+    bits = RNG.integers(0, 1 << 31, 200_000, dtype=np.uint64).astype(np.uint32)
+    x = np.concatenate([bits.view(np.float32), SPECIAL])
+    pos, neg = mod[f"k_{name}"](x), mod[f"k_{name}"](-x)
+    assert np.array_equal(np.isnan(pos), np.isnan(neg))  # NaN (outside the domain): any sign
+    ok = ~np.isnan(pos)
+    np.testing.assert_array_equal(neg[ok].view(np.uint32), (-pos[ok]).view(np.uint32))
