@@ -11,7 +11,7 @@ from pathlib import Path
 from .diagnostics import read_source_file
 
 STDLIB = Path(__file__).resolve().parent.parent / "stdlib"
-PRELUDE = ("types", "math")
+PRELUDE = ("types", "math", "special")
 
 
 def is_path(source_or_path: str | os.PathLike) -> bool:

@@ -1,7 +1,7 @@
 """Name resolution, type checking, overload resolution and plugin interface checks.
 
-:func:`check_program` loads the implicit prelude (``stdlib/types.rdsl``, ``stdlib/math.rdsl``),
-the main file and everything it imports (:mod:`.imports`), and returns a
+:func:`check_program` loads the implicit prelude (``stdlib/types.rdsl``, ``stdlib/math.rdsl``,
+``stdlib/special.rdsl``), the main file and everything it imports (:mod:`.imports`), and returns a
 :class:`CheckedProgram`.  The AST is annotated in place (``Expr.ty``, ``Name.sym``,
 ``Call.target``, implicit :class:`ast.Convert` nodes) so that :mod:`rdsl.dsl.lower` needs no
 type logic of its own.

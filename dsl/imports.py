@@ -84,9 +84,10 @@ def prelude() -> list[Path]:
     """The implicitly imported stdlib files."""
     types = STDLIB / "types.rdsl"
     math = STDLIB / "math.rdsl"
-    # Both are part of the package; a broken prelude is an rdsl bug, and it is reported as
+    special = STDLIB / "special.rdsl"
+    # They are part of the package; a broken prelude is an rdsl bug, and it is reported as
     # a diagnostic in the prelude file rather than skipped, so nothing half-works silently.
-    return [p for p in (types, math) if p.is_file()]
+    return [p for p in (types, math, special) if p.is_file()]
 
 
 def load_program(source: str, filename: str, search_paths: list[Path] | None = None,

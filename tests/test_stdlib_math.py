@@ -300,15 +300,31 @@ def test_bench_ulp_sampled_sweep_stays_within_the_documented_bounds(capsys):
 
 
 def test_docs_math_md_states_the_bounds_the_code_asserts():
-    """docs/math.md's table and stdlib/math.rdsl's comments state the bounds of BOUNDS."""
+    """docs/math.md's table and the comments of stdlib/math.rdsl and stdlib/special.rdsl
+    state the bounds of BOUNDS."""
     root = Path(rdsl.__file__).parent
-    cells = [[c.strip() for c in re.split(r"(?<!\\)\|", line)[1:-1]]
-             for line in (root / "docs" / "math.md").read_text().splitlines()
-             if line.startswith("| ") and not line.startswith("| function")]
+    lines = (root / "docs" / "math.md").read_text().splitlines()
+    head = next(i for i, line in enumerate(lines) if "| bound (ulp) |" in line)
+    rest = lines[head + 2:]  # the rows of that table: up to the first line that is not one
+    table = rest[:next((i for i, line in enumerate(rest) if not line.startswith("| ")),
+                       len(rest))]
+    cells = [[c.strip() for c in re.split(r"(?<!\\)\|", line)[1:-1]] for line in table]
     assert {c[0]: float(c[2]) for c in cells} == UNARY_BOUNDS
-    stdlib = (root / "stdlib" / "math.rdsl").read_text()
+    stdlib = "".join((root / "stdlib" / f).read_text() for f in ("math.rdsl", "special.rdsl"))
     for name, bound in UNARY_BOUNDS.items():
-        if name in ("sqrt", "rsqrt"):
-            continue  # a builtin (IEEE) and a one-line helper, no comment to check
+        if name == "sqrt":
+            continue  # a builtin (IEEE), no comment to check
         doc = re.search(r"///([^\n]*\n///)*[^\n]*\n(?:///[^\n]*\n)*fn %s\(" % name, stdlib)
         assert doc and f"max error {bound:g} ulp" in doc.group(0), name
+
+
+@pytest.mark.parametrize("name", ["asin", "atan", "erf", "erfinv"])
+def test_odd_functions_are_odd_bit_for_bit(mod, name):
+    """f(-x) == -f(x) exactly (the sign is applied last), so an exhaustive sweep of x >= +0
+    (bench/ulp.py --bits 0:80000000) covers the negative half too."""
+    bits = RNG.integers(0, 1 << 31, 200_000, dtype=np.uint64).astype(np.uint32)
+    x = np.concatenate([bits.view(np.float32), SPECIAL])
+    pos, neg = mod[f"k_{name}"](x), mod[f"k_{name}"](-x)
+    assert np.array_equal(np.isnan(pos), np.isnan(neg))  # NaN (outside the domain): any sign
+    ok = ~np.isnan(pos)
+    np.testing.assert_array_equal(neg[ok].view(np.uint32), (-pos[ok]).view(np.uint32))

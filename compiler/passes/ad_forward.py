@@ -46,7 +46,7 @@ PARTIALS: dict[str, tuple[str, ...]] = {
     name: tuple(f"{name}_d{k}" for k in range(n)) for name, n in (
         ("sin", 1), ("cos", 1), ("tan", 1), ("exp", 1), ("exp2", 1), ("log", 1), ("log2", 1),
         ("pow", 2), ("atan", 1), ("atan2", 2), ("asin", 1), ("acos", 1), ("erf", 1),
-        ("erfinv", 1), ("copysign", 2), ("mulsign", 2), ("mulsign_neg", 2))}
+        ("erfinv", 1), ("rsqrt", 1), ("copysign", 2), ("mulsign", 2), ("mulsign_neg", 2))}
 PARAM_BUFFER, TANGENT_BUFFER = "PRM", "dPRM"
 _LINEAR = {Op.ADD, Op.SUB, Op.NEG}
 
