@@ -142,6 +142,9 @@ CHI2_CASES = (
     + [("roughdielectric", {"alpha": a, "distribution": d}, t)
        for d in (0, 1) for a in ALPHAS for t in THETAS]
     + [("roughdielectric", {"alpha": a}, np.pi - t) for a in (0.05, 0.3) for t in (0.3, 1.0)]
+    + [("roughdielectric", {"alpha": 0.1, "alpha_v": 0.4, "distribution": d}, t)
+       for d in (0, 1) for t in (0.3, 1.0)]
+    + [("roughdielectric", {"alpha": 0.1, "alpha_v": 0.4, "distribution": 0}, np.pi - 1.0)]
     + [("roughplastic", {"alpha": a, "diffuse_reflectance": 0.6}, t)
        for a in ALPHAS for t in THETAS]
     + [("roughplastic", {"alpha": 0.3, "distribution": 1}, 1.0)]
@@ -164,6 +167,7 @@ CHI2_REDUCED = ["diffuse[]@1.00", "roughconductor[alpha=0.3]@1.00",
                 "roughdielectric[alpha=0.3,distribution=0]@1.00",
                 "roughdielectric[alpha=0.05,distribution=1]@0.30",
                 f"roughdielectric[alpha=0.3]@{np.pi - 1.0:.2f}",
+                "roughdielectric[alpha=0.1,alpha_v=0.4,distribution=1]@1.00",
                 "roughplastic[alpha=0.3]@1.00", "blend_example[alpha=0.3]@1.45"]
 _CHI2_BY_ID = {_case_id(c): c for c in CHI2_CASES}
 assert set(CHI2_REDUCED) <= set(_CHI2_BY_ID)
@@ -332,6 +336,7 @@ CONSISTENCY = (
     + [("roughconductor", {"alpha": 0.05, "alpha_v": 0.6, "distribution": d, **GOLD})
        for d in (0, 1)]
     + [("roughdielectric", {"alpha": a, "distribution": d}) for a in ALPHAS for d in (0, 1)]
+    + [("roughdielectric", {"alpha": 0.1, "alpha_v": 0.4, "distribution": d}) for d in (0, 1)]
     + [("roughplastic", {"alpha": a, "distribution": d}) for a in (0.05, 0.7) for d in (0, 1)]
     + [("plastic", {})]
     + [("blend_example", {"alpha": a, **GOLD}) for a in ALPHAS]
