@@ -2,9 +2,9 @@
 the `mitsuba` package): eval() and pdf() of stdlib/bsdf/roughdielectric.rdsl in the `rgb`
 variant against Mitsuba's `roughdielectric` in `scalar_rgb`, for random pairs of directions
 (reflection and transmission, light from outside and inside), GGX and Beckmann, with
-alpha_u = 0.1 along the shading frame's x axis and alpha_v = 0.4 along y.  Also through a
-scene: `alpha_u`/`alpha_v` in the XML reach the plugin as Mitsuba orders them.
-(tests/test_bsdf_plugins.py checks sample() against pdf() by chi-square for this case.)"""
+alpha_u = 0.1 along the shading frame's x axis and alpha_v = 0.4 along y.  (sample()
+against pdf() by chi-square: tests/test_bsdf_plugins.py; the scene's `alpha_u`/`alpha_v`:
+tests/test_scene_bsdfs.py and tests/test_textured_params.py.)"""
 
 from __future__ import annotations
 
@@ -91,18 +91,3 @@ def test_eval_pdf_match_mitsuba(mi, mod, dist):
     other = np.asarray(mod["roughdielectric.eval"](si, wo, **swapped)).reshape(n, 3)
     assert np.abs(other - theirs).max() > 0.1 * theirs.max()
 
-
-def test_scene_alpha_uv_reaches_plugin(tmp_path):
-    """`alpha_u`/`alpha_v` in a scene become the plugin's `alpha`/`alpha_v` (no load error)."""
-    from rdsl.runtime.render.bsdfs import bsdf_instance
-    from rdsl.runtime.scene.loader import load_scene_description
-
-    xml = tmp_path / "s.xml"
-    xml.write_text("""<scene version="3.0.0">
-  <shape type="sphere"><bsdf type="roughdielectric">
-    <float name="alpha_u" value="0.1"/><float name="alpha_v" value="0.4"/>
-  </bsdf></shape>
-</scene>""")
-    inst = bsdf_instance(load_scene_description(xml).shapes[0].bsdf)
-    leaf = inst if inst.plugin == "roughdielectric" else inst.children[0]
-    assert leaf.params["alpha"] == pytest.approx(0.1) and leaf.params["alpha_v"] == 0.4

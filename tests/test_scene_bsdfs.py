@@ -247,14 +247,15 @@ def test_parameter_mapping(tmp_path):
                      'value="ggx"/><float name="int_ior" value="1.33"/></bsdf>')
     assert inst.params["distribution"] == 0 and inst.params["int_ior"] == 1.33
     assert "eta" not in inst.params  # derived from the IORs by the loader
+    inst = load_bsdf(tmp_path, '<bsdf type="roughdielectric"><float name="alpha_u" '
+                     'value="0.1"/><float name="alpha_v" value="0.3"/></bsdf>')
+    assert inst.params["alpha"] == 0.1 and inst.params["alpha_v"] == 0.3  # Mitsuba's u, v
     inst = load_bsdf(tmp_path, '<bsdf type="plastic"><boolean name="nonlinear" value="true"/>'
                      '</bsdf>')
     assert inst.params["nonlinear"] is True
 
 
 @pytest.mark.parametrize("bsdf,words", [
-    (('<bsdf type="roughdielectric"><float name="alpha_u" value="0.1"/>'
-      '<float name="alpha_v" value="0.3"/></bsdf>'), "anisotropic"),
     ('<bsdf type="roughplastic"><boolean name="sample_visible" value="false"/></bsdf>',
      "sample_visible"),
     (('<bsdf type="blendbsdf"><float name="weight" value="0.5"/><bsdf type="diffuse"/>'

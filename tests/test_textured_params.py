@@ -138,6 +138,15 @@ def test_anisotropic_roughness_from_textures(tmp_path):
     assert_regions(img, *consts)
 
 
+def test_anisotropic_roughness_of_roughdielectric_from_textures(tmp_path):
+    # alpha_v textured, alpha_u constant: each region renders as its constant alpha_v
+    def bsdf(av: str) -> str:
+        return plane(f'<bsdf type="roughdielectric"><float name="alpha_u" value="0.05"/>'
+                     f'{av}</bsdf>')
+    consts = [render(tmp_path, bsdf(const("alpha_v", av))) for av in (A0, A1)]
+    assert_regions(render(tmp_path, bsdf(checker("alpha_v"))), *consts)
+
+
 def test_textured_alpha_in_spectral_and_generic_builds(tmp_path):
     """In spectral builds a roughness texture's texels stay RGB (its colour lookups would be
     coefficients); the generic build reads the texture's parameters at run time."""
