@@ -13,6 +13,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import rdsl
+from _mitsuba_render import mitsuba_variant
 
 STDLIB = Path(rdsl.__file__).resolve().parent / "stdlib"
 f32 = np.float32
@@ -21,15 +22,8 @@ AU, AV = 0.1, 0.4
 
 @pytest.fixture(scope="module")
 def mi():
-    mitsuba = pytest.importorskip("mitsuba", reason="the mitsuba package is not installed")
-    previous = mitsuba.variant()
-    try:
-        mitsuba.set_variant("scalar_rgb")
-    except Exception as e:  # noqa: BLE001 - any failure means no cross-check here
-        pytest.skip(f"mitsuba variant scalar_rgb unavailable: {e}")
-    yield mitsuba
-    if previous is not None:
-        mitsuba.set_variant(previous)
+    with mitsuba_variant("scalar_rgb") as mitsuba:
+        yield mitsuba
 
 
 @pytest.fixture(scope="module")
