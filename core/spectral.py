@@ -205,6 +205,15 @@ def eval_coeffs(coeffs: np.ndarray, lam: np.ndarray | float) -> np.ndarray:
     return s[..., 0] if lam.ndim == 0 else s
 
 
+def srgb_model_mean(rgb: np.ndarray) -> np.ndarray:
+    """Mitsuba 3's one value of an sRGB reflectance in spectral variants (the ``srgb``
+    texture's ``eval_1``, its ``mean()``: ``srgb_model_mean``): the mean of the upsampled
+    spectrum at 16 wavelengths evenly spaced over [360, 830] nm.  ``rgb`` (..., 3) gives
+    (...); the colour is rounded to float32 first, as Mitsuba stores it."""
+    rgb = np.asarray(rgb, np.float32).astype(np.float64)
+    return eval_coeffs(rgb_to_coeffs(rgb), np.linspace(LAMBDA_MIN, LAMBDA_MAX, 16)).mean(-1)
+
+
 def illuminant_from_rgb(rgb: np.ndarray) -> tuple[np.ndarray, float | np.ndarray]:
     """Coefficients and scale of an RGB radiance in a spectral variant (Mitsuba's ``d65``).
 

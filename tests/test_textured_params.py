@@ -1,8 +1,12 @@
 """Textures on Float parameters (the roughness `alpha`, `alpha_u`, `alpha_v`) and on an area
 emitter's `radiance`.
 
-A Float parameter reads the texture's one-value lookup, Mitsuba's `eval_1`: the luminance of
-the linear RGB (the value itself for a grey image).  The scene: a unit rectangle filling the
+A Float parameter reads the texture's one-value lookup, Mitsuba's `eval_1`, whose convention
+depends on the texture: a bitmap gives the luminance of its linear RGB (the value itself for
+a grey image); a checkerboard of rgb colours gives the one value of Mitsuba's `srgb` texture,
+the mean of the channels in rgb variants, the luminance in mono and the mean of the
+upsampled spectrum in spectral (`test_one_values_are_mitsubas` checks these constants against
+Mitsuba 3 itself).  The scene: a unit rectangle filling the
 view of a camera straight above it, lit by a point light, so a pixel's estimate is
 deterministic given its samples and every pixel sees one region of a 2x2 checkerboard (or a
 2x2 bitmap with nearest filtering).  With the same seed, each pixel of the textured render
@@ -20,12 +24,15 @@ import pytest
 pytest.importorskip("rdsl.runtime.embree")
 
 from rdsl.compiler.diagnostics import CompileError
+from rdsl.core.spectral import srgb_model_mean
 from rdsl.runtime.render.image import write_exr
 from rdsl.runtime.render.renderer import load_scene
 
 LUMINANCE = np.array([0.212671, 0.715160, 0.072169])
 C0, C1 = np.array([0.1, 0.6, 0.2]), np.array([0.5, 0.2, 0.9])
-A0, A1 = float(C0 @ LUMINANCE), float(C1 @ LUMINANCE)  # 0.4650, 0.3144
+A0, A1 = float(C0 @ LUMINANCE), float(C1 @ LUMINANCE)  # 0.4650, 0.3144: a bitmap's
+M0, M1 = float(C0.mean()), float(C1.mean())  # 0.3, 0.5333: a checkerboard's in rgb variants
+S0, S1 = (float(x) for x in srgb_model_mean([C0, C1]))  # a checkerboard's in spectral
 FOV = 2 * math.degrees(math.atan(1 / 4))  # the rectangle [-1, 1]^2 fills the view from z = 4
 POINT = ('<emitter type="point"><point name="position" x="0.7" y="0.4" z="1.2"/>'
          '<rgb name="intensity" value="5"/></emitter>')
@@ -90,18 +97,61 @@ def assert_regions(img: np.ndarray, a: np.ndarray, b: np.ndarray, rtol: float = 
     assert on_b == [not x for x in on_a], (on_a, on_b)
 
 
-def constants(tmp_path: Path, plugin: str, variant: str = "rgb", extra: str = ""
-              ) -> tuple[np.ndarray, np.ndarray]:
+def constants(tmp_path: Path, plugin: str, variant: str = "rgb", extra: str = "",
+              values: tuple[float, float] = (A0, A1)) -> tuple[np.ndarray, np.ndarray]:
     return tuple(render(tmp_path, plane(f'<bsdf type="{plugin}"><float name="alpha" '
                                         f'value="{a}"/>{extra}</bsdf>'), variant)
-                 for a in (A0, A1))
+                 for a in values)
+
+
+def test_one_values_are_mitsubas():
+    """The constants above are Mitsuba 3's eval_1 of the same textures (the checkerboard's
+    regions the other way round, as Mitsuba 3.9's), in its rgb, spectral and mono variants
+    (mono: where an LLVM variant runs, DRJIT_LIBLLVM_PATH set)."""
+    mi = pytest.importorskip("mitsuba")
+    expected = {"scalar_rgb": ((M1, M0), (A0, A1)), "scalar_spectral": ((S1, S0), (A0, A1)),
+                "llvm_ad_mono": ((A1, A0), (A0, A1))}
+    before, ran = mi.variant(), []
+    for variant, (check, bmp) in expected.items():
+        try:
+            mi.set_variant(variant)
+        except (ImportError, RuntimeError, AttributeError):
+            assert variant.startswith("llvm")  # the scalar variants always run
+            continue
+        si = mi.SurfaceInteraction3f()
+        tex = mi.load_dict({"type": "checkerboard", "color0": {"type": "rgb", "value": C0},
+                            "color1": {"type": "rgb", "value": C1}})
+        img = mi.TensorXf(np.array([[C0, C1]], np.float32))
+        raw = mi.load_dict({"type": "bitmap", "data": img, "raw": True,
+                            "filter_type": "nearest"})
+        got, got_bmp = [], []
+        for u in (0.25, 0.75):  # color0's region, then color1's (v = 0.25)
+            si.uv = mi.Point2f(u, 0.25)
+            got.append(float(np.ravel(tex.eval_1(si))[0]))
+            got_bmp.append(float(np.ravel(raw.eval_1(si))[0]))
+        np.testing.assert_allclose(got, check, rtol=1e-5, err_msg=variant)
+        np.testing.assert_allclose(got_bmp, bmp, rtol=1e-5, err_msg=variant)
+        ran.append(variant)
+    if before:
+        mi.set_variant(before)
+    assert "scalar_spectral" in ran
 
 
 def test_roughconductor_alpha_from_checkerboard_and_bitmap(tmp_path):
-    a, b = constants(tmp_path, "roughconductor")
-    for tex in (checker("alpha"), bitmap(tmp_path, "alpha")):
+    for tex, values in ((checker("alpha"), (M0, M1)), (bitmap(tmp_path, "alpha"), (A0, A1))):
+        a, b = constants(tmp_path, "roughconductor", values=values)
         img = render(tmp_path, plane(f'<bsdf type="roughconductor">{tex}</bsdf>'))
         assert_regions(img, a, b)
+
+
+@pytest.mark.parametrize("variant, values", [("mono", (A0, A1)), ("spectral", (S0, S1))])
+def test_checkerboard_alpha_in_mono_and_spectral(tmp_path, variant, values):
+    """A checkerboard's one value is Mitsuba's per variant: the luminance in mono, the
+    upsampled spectrum's mean in spectral."""
+    a, b = constants(tmp_path, "roughconductor", variant, values=values)
+    img = render(tmp_path, plane(f'<bsdf type="roughconductor">{checker("alpha")}</bsdf>'),
+                 variant)
+    assert_regions(img, a, b)
 
 
 def test_constant_texture_equals_constant_alpha(tmp_path):
@@ -112,7 +162,7 @@ def test_constant_texture_equals_constant_alpha(tmp_path):
 
 
 def test_textured_alpha_of_roughdielectric(tmp_path):
-    a, b = constants(tmp_path, "roughdielectric")
+    a, b = constants(tmp_path, "roughdielectric", values=(M0, M1))
     img = render(tmp_path, plane(f'<bsdf type="roughdielectric">{checker("alpha")}</bsdf>'))
     assert_regions(img, a, b)
 
@@ -131,7 +181,7 @@ def test_anisotropic_roughness_from_textures(tmp_path):
     consts = [render(tmp_path, plane(
         f'<bsdf type="roughconductor"><string name="distribution" value="ggx"/>'
         f'<float name="alpha_u" value="{au}"/><float name="alpha_v" value="0.05"/></bsdf>'))
-        for au in (A0, A1)]
+        for au in (M0, M1)]
     img = render(tmp_path, plane(
         '<bsdf type="roughconductor"><string name="distribution" value="ggx"/>'
         f'{checker("alpha_u")}<float name="alpha_v" value="0.05"/></bsdf>'))
@@ -198,21 +248,21 @@ def const(name: str, v: float) -> str:
 def test_textured_blend_weight_and_mask_opacity(tmp_path, make, name):
     """blendbsdf's weight and mask's opacity read the texture's one-value lookup (`eval_1`,
     as Mitsuba): each checker region renders as the constant weight of that region."""
-    a, b = (render(tmp_path, plane(make(const(name, v)))) for v in (A0, A1))
-    for tex in (checker(name), bitmap(tmp_path, name)):
+    for tex, values in ((checker(name), (M0, M1)), (bitmap(tmp_path, name), (A0, A1))):
+        a, b = (render(tmp_path, plane(make(const(name, v)))) for v in values)
         assert_regions(render(tmp_path, plane(make(tex))), a, b)
 
 
 def test_two_textured_weights_in_one_tree_and_the_generic_build(tmp_path):
     """A mask with a textured opacity around a blend with a textured weight (two texture
     slots of one mixture): the regions are the four constant combinations, here along the
-    diagonal (both checkerboards share the layout: A0 with A0, A1 with A1).  The generic
+    diagonal (both checkerboards share the layout: M0 with M0, M1 with M1).  The generic
     build gives the same image."""
     def tree(opacity: str, weight: str) -> str:
         return plane(mask_xml(opacity, blend_xml(weight)))
 
-    a = render(tmp_path, tree(const("opacity", A0), const("weight", A0)))
-    b = render(tmp_path, tree(const("opacity", A1), const("weight", A1)))
+    a = render(tmp_path, tree(const("opacity", M0), const("weight", M0)))
+    b = render(tmp_path, tree(const("opacity", M1), const("weight", M1)))
     textured = tree(checker("opacity"), checker("weight"))
     assert_regions(render(tmp_path, textured), a, b)
     np.testing.assert_allclose(render(tmp_path, textured, specialize=False),

@@ -8,7 +8,8 @@ texels of every bitmap are concatenated into ``T`` (3 float32 per texel, rows to
 each bitmap's offset, width and height being constants of its instance.  A texture that
 sets a colour stores them as the variant stores colours (runtime/render/colors.py); one that
 sets a Float parameter (``alpha``...) is a separate instance whose texels stay linear RGB,
-which its ``eval_1`` reads (Mitsuba's single-channel lookup: their luminance), and one that
+which its ``eval_1`` reads (Mitsuba's single-channel lookup: their luminance; a checkerboard's
+colours give the one value of Mitsuba's ``srgb`` texture, ``srgb_eval_1``), and one that
 sets emitted light (an area emitter's ``radiance``) another, whose lookups are emitted
 colours (``illuminant``: times D65 in spectral builds, as Mitsuba's ``texture_d65``).
 Lookups, filtering and wrapping happen in rdsl (``stdlib/texture/bitmap.rdsl``); Python only
@@ -26,6 +27,7 @@ import numpy as np
 from ...compiler.diagnostics import CompileError
 from ...core.color import RGB, ColorModel
 from ...core.scene_spec import Instance, SpectrumValue, TextureRef
+from ...core.spectral import srgb_model_mean
 from ..plugins import stdlib_names
 from ..scene.mesh_attributes import attribute_textures
 from ..scene.reads import memoized
@@ -181,6 +183,7 @@ class TextureTable:
                 params[c] = spectrum_value(p[c], f"checkerboard.{c}", illuminant=emitted,
                                            loc=plugin.loc)
                 params["rgb" + c[-1]] = tuple(float(x) for x in rgb)  # for eval_1
+                params["spectral_mean" + c[-1]] = float(srgb_model_mean(rgb))
         else:
             offset, w, h, mean, scale = self._image(p["filename"], bool(p["raw"]), plugin,
                                                     usage)
