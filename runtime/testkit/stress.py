@@ -17,7 +17,8 @@ Counted per plugin and variant: NaN and Inf among the outputs (eval, pdf, the sa
 pdf, weight and eta; an emitter's radiance; a texture's eval and eval_1), negative values
 (eval, pdf, weights, radiance, texture values), energy gain (cases whose Monte Carlo albedo
 from sample(), the mean of weight * eta^2 as :mod:`bsdf_checks` computes it, exceeds
-``1 + ENERGY_TOL + 4`` standard errors), and mismatches (non-Dirac samples whose pdf differs
+``1 + ENERGY_TOL + 4`` standard errors; ``ENERGY_TOL_PLUGIN`` for the stdlib models that are
+not energy conserving by design, from the albedo of Mitsuba 3's plugin), and mismatches (non-Dirac samples whose pdf differs
 from pdf() by more than ``RTOL_PDF`` or whose weight differs from eval()/pdf() by more than
 ``RTOL_WEIGHT``, the tolerances of ``rdsl test-plugin``).
 
@@ -49,6 +50,18 @@ from .texture_checks import _uvs
 f32 = np.float32
 COS_WI = (1.0, 0.5, 1e-3, 1e-5, 1e-7, 0.0, -1e-7, -0.5)
 ENERGY_TOL = 1e-3
+# stdlib models that are not energy conserving by design, with the energy tolerance that
+# Mitsuba 3's own plugin needs over this sweep (its albedo measured at the same inputs,
+# llvm_ad_rgb, 2^18 samples per case, the mean of the sample weights):
+ENERGY_TOL_PLUGIN = {
+    # Disney's diffuse (its retro-reflection) and specular lobes are not jointly normalized:
+    # Mitsuba's principled reflects 1.044 at normal incidence with base_color 1, 1.192 at
+    # cos 1e-3, and at most 1.552 +- 0.037 (cos 1e-7, roughness 0.01, eta 0.5)
+    "principled": 0.6,
+    # the same diffuse lobe in the thin model: Mitsuba's principledthin reflects 1.0059 at
+    # normal incidence with base_color 1, at most 1.0084 (cos 0.5, base_color 1)
+    "principledthin": 0.01,
+}
 ROUGH = (1e-4, 1e-3, 1e-2, 0.1, 0.5, 1.0)
 IOR = (1.0001, 1.33, 2.0, 4.0, 0.5)
 FAST = {"rough": (1e-4, 0.1, 1.0), "ior": (1.0001, 4.0, 0.5), "samples": 4096, "wo": 256,
@@ -189,13 +202,19 @@ def _mismatches(bs: dict, ev: np.ndarray, pd: np.ndarray) -> tuple[int, str]:
     return count, why
 
 
-def _albedo_gain(bs: dict, n: int) -> tuple[bool, str]:
+def energy_tol(decl: Declaration) -> float:
+    """ENERGY_TOL, or the stdlib plugin's own (ENERGY_TOL_PLUGIN)."""
+    stdlib = decl.path.resolve().is_relative_to(STDLIB.resolve())
+    return ENERGY_TOL_PLUGIN.get(decl.name, ENERGY_TOL) if stdlib else ENERGY_TOL
+
+
+def _albedo_gain(bs: dict, n: int, tol: float = ENERGY_TOL) -> tuple[bool, str]:
     w = np.asarray(bs["weight"], np.float64).reshape(n, -1)
     w = w * np.asarray(bs["eta"], np.float64)[:, None] ** 2
     w = np.where(np.isfinite(w), w, 0.0)
     a, s = w.mean(0), w.std(0) / math.sqrt(n)
     k = int(np.argmax(a - 4 * s))
-    limit = 1 + ENERGY_TOL + 4 * s[k]
+    limit = 1 + tol + 4 * s[k]
     return a[k] > limit, f"albedo {a[k]:.4f} > {limit:.4f}"
 
 
@@ -214,7 +233,7 @@ def stress_bsdf(h: Harness, c: Counts, sets: list[dict], cos_wis: tuple, n_wo: i
             c.mismatch += m
             if m:
                 c.note("mismatch", f"mismatch: {why} at {where}")
-            gain, why = _albedo_gain(bs, n)
+            gain, why = _albedo_gain(bs, n, energy_tol(h.decl))
             if gain:
                 c.energy_gain += 1
                 c.note("energy", f"energy gain: {why} at {where}")
