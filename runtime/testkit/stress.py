@@ -66,6 +66,31 @@ ROUGH = (1e-4, 1e-3, 1e-2, 0.1, 0.5, 1.0)
 IOR = (1.0001, 1.33, 2.0, 4.0, 0.5)
 FAST = {"rough": (1e-4, 0.1, 1.0), "ior": (1.0001, 4.0, 0.5), "samples": 4096, "wo": 256,
         "cos_wi": (1.0, 1e-7, 0.0, -0.5)}
+# Cases where a float32 microfacet model cannot recover its half vector m from (wi, wo), so
+# that no implementation can meet RTOL_PDF / RTOL_WEIGHT: their mismatches are not counted
+# (the note says how many). Measured on Mitsuba 3's plugins (llvm_ad_rgb, GGX, 4096 samples,
+# the same checks): near-Dirac lobes, roughconductor at alpha 1e-4 / 1e-3 / 1e-2 and cos
+# theta_i 1e-3: 4069 / 3209 / 11 samples mismatch, roughdielectric 4078 / 3815 / 1257 (and
+# 1119 at alpha 1e-4, cos 0.5); refraction with a relative IOR within 1e-3 of 1, where
+# wi.m + eta wo.m cancels: roughdielectric at int_ior 1.0001, 905 at cos 0.5, 2465 at -0.5.
+MICROFACET = ("roughconductor", "roughdielectric")
+
+
+def mismatch_exempt(decl: Declaration, params: dict, cos_wi: float) -> str:
+    """Why the mismatches of this case are not counted, or ''."""
+    if decl.name not in MICROFACET or not decl.path.resolve().is_relative_to(STDLIB.resolve()):
+        return ""
+    value = {p.name: params.get(p.name, p.default) for p in decl.params}
+    rough = min((float(v) for k, v in value.items() if _kind(k) == "rough" and float(v) >= 0),
+                default=1.0)
+    if rough <= 1e-4 and abs(cos_wi) < 1 or rough <= 1e-2 and abs(cos_wi) <= 1e-3:
+        return "near-Dirac lobe"
+    if {"int_ior", "ext_ior"} <= value.keys():
+        if abs(float(value["int_ior"]) / float(value["ext_ior"]) - 1) < 1e-3:
+            return "relative IOR ~ 1"
+    return ""
+
+
 SKIP_FILES = ("common", "blend_example")   # helpers and an example, not plugins to ship
 # stdlib plugins the one-plugin harness cannot call meaningfully, and why
 SKIP_PLUGINS = {"bitmap": "reads its texels from the scene's image buffer, which a one-plugin "
@@ -86,6 +111,7 @@ class Counts:
     bad_param_cases: int = 0
     bad_param_propagated: int = 0
     bad_param_garbage: int = 0
+    exempt: int = 0   # cases whose mismatches are not counted (mismatch_exempt)
     notes: dict[str, str] = field(default_factory=dict)  # the first problem of each kind
 
     def failed(self) -> bool:
@@ -230,6 +256,11 @@ def stress_bsdf(h: Harness, c: Counts, sets: list[dict], cos_wis: tuple, n_wo: i
                        **{f"sample.{k}": bs[k] for k in ("wo", "pdf", "weight", "eta")}}
             _tally(c, outputs, ("sample.wo",), where)
             m, why = _mismatches(bs, ev, pd)
+            exempt = mismatch_exempt(h.decl, params, cos_wi)
+            if m and exempt:
+                c.exempt += 1
+                c.note("exempt", f"{exempt} at {where}")
+                m = 0
             c.mismatch += m
             if m:
                 c.note("mismatch", f"mismatch: {why} at {where}")
@@ -237,6 +268,9 @@ def stress_bsdf(h: Harness, c: Counts, sets: list[dict], cos_wis: tuple, n_wo: i
             if gain:
                 c.energy_gain += 1
                 c.note("energy", f"energy gain: {why} at {where}")
+    if c.exempt:
+        c.notes["exempt"] = (f"mismatches not counted in {c.exempt} case(s) where float32 "
+                             f"cannot recover m (MICROFACET), the first: {c.notes['exempt']}")
 
 
 def _emitter_or_texture(h: Harness, params: dict, n: int) -> dict[str, np.ndarray]:
