@@ -17,7 +17,8 @@ Counted per plugin and variant: NaN and Inf among the outputs (eval, pdf, the sa
 pdf, weight and eta; an emitter's radiance; a texture's eval and eval_1), negative values
 (eval, pdf, weights, radiance, texture values), energy gain (cases whose Monte Carlo albedo
 from sample(), the mean of weight * eta^2 as :mod:`bsdf_checks` computes it, exceeds
-``1 + ENERGY_TOL + 4`` standard errors), and mismatches (non-Dirac samples whose pdf differs
+``1 + ENERGY_TOL + 4`` standard errors; ``ENERGY_TOL_PLUGIN`` for the stdlib models that are
+not energy conserving by design, from the albedo of Mitsuba 3's plugin), and mismatches (non-Dirac samples whose pdf differs
 from pdf() by more than ``RTOL_PDF`` or whose weight differs from eval()/pdf() by more than
 ``RTOL_WEIGHT``, the tolerances of ``rdsl test-plugin``).
 
@@ -49,10 +50,47 @@ from .texture_checks import _uvs
 f32 = np.float32
 COS_WI = (1.0, 0.5, 1e-3, 1e-5, 1e-7, 0.0, -1e-7, -0.5)
 ENERGY_TOL = 1e-3
+# stdlib models that are not energy conserving by design, with the energy tolerance that
+# Mitsuba 3's own plugin needs over this sweep (its albedo measured at the same inputs,
+# llvm_ad_rgb, 2^18 samples per case, the mean of the sample weights):
+ENERGY_TOL_PLUGIN = {
+    # Disney's diffuse (its retro-reflection) and specular lobes are not jointly normalized:
+    # Mitsuba's principled reflects 1.044 at normal incidence with base_color 1, 1.192 at
+    # cos 1e-3, and at most 1.552 +- 0.037 (cos 1e-7, roughness 0.01, eta 0.5)
+    "principled": 0.6,
+    # the same diffuse lobe in the thin model: Mitsuba's principledthin reflects 1.0059 at
+    # normal incidence with base_color 1, at most 1.0084 (cos 0.5, base_color 1)
+    "principledthin": 0.01,
+}
 ROUGH = (1e-4, 1e-3, 1e-2, 0.1, 0.5, 1.0)
 IOR = (1.0001, 1.33, 2.0, 4.0, 0.5)
 FAST = {"rough": (1e-4, 0.1, 1.0), "ior": (1.0001, 4.0, 0.5), "samples": 4096, "wo": 256,
         "cos_wi": (1.0, 1e-7, 0.0, -0.5)}
+# Cases where a float32 microfacet model cannot recover its half vector m from (wi, wo), so
+# that no implementation can meet RTOL_PDF / RTOL_WEIGHT: their mismatches are not counted
+# (the note says how many). Measured on Mitsuba 3's plugins (llvm_ad_rgb, GGX, 4096 samples,
+# the same checks): near-Dirac lobes, roughconductor at alpha 1e-4 / 1e-3 / 1e-2 and cos
+# theta_i 1e-3: 4069 / 3209 / 11 samples mismatch, roughdielectric 4078 / 3815 / 1257 (and
+# 1119 at alpha 1e-4, cos 0.5); refraction with a relative IOR within 1e-3 of 1, where
+# wi.m + eta wo.m cancels: roughdielectric at int_ior 1.0001, 905 at cos 0.5, 2465 at -0.5.
+MICROFACET = ("roughconductor", "roughdielectric")
+
+
+def mismatch_exempt(decl: Declaration, params: dict, cos_wi: float) -> str:
+    """Why the mismatches of this case are not counted, or ''."""
+    if decl.name not in MICROFACET or not decl.path.resolve().is_relative_to(STDLIB.resolve()):
+        return ""
+    value = {p.name: params.get(p.name, p.default) for p in decl.params}
+    rough = min((float(v) for k, v in value.items() if _kind(k) == "rough" and float(v) >= 0),
+                default=1.0)
+    if rough <= 1e-4 and abs(cos_wi) < 1 or rough <= 1e-2 and abs(cos_wi) <= 1e-3:
+        return "near-Dirac lobe"
+    if {"int_ior", "ext_ior"} <= value.keys():
+        if abs(float(value["int_ior"]) / float(value["ext_ior"]) - 1) < 1e-3:
+            return "relative IOR ~ 1"
+    return ""
+
+
 SKIP_FILES = ("common", "blend_example")   # helpers and an example, not plugins to ship
 # stdlib plugins the one-plugin harness cannot call meaningfully, and why
 SKIP_PLUGINS = {"bitmap": "reads its texels from the scene's image buffer, which a one-plugin "
@@ -73,6 +111,7 @@ class Counts:
     bad_param_cases: int = 0
     bad_param_propagated: int = 0
     bad_param_garbage: int = 0
+    exempt: int = 0   # cases whose mismatches are not counted (mismatch_exempt)
     notes: dict[str, str] = field(default_factory=dict)  # the first problem of each kind
 
     def failed(self) -> bool:
@@ -189,13 +228,19 @@ def _mismatches(bs: dict, ev: np.ndarray, pd: np.ndarray) -> tuple[int, str]:
     return count, why
 
 
-def _albedo_gain(bs: dict, n: int) -> tuple[bool, str]:
+def energy_tol(decl: Declaration) -> float:
+    """ENERGY_TOL, or the stdlib plugin's own (ENERGY_TOL_PLUGIN)."""
+    stdlib = decl.path.resolve().is_relative_to(STDLIB.resolve())
+    return ENERGY_TOL_PLUGIN.get(decl.name, ENERGY_TOL) if stdlib else ENERGY_TOL
+
+
+def _albedo_gain(bs: dict, n: int, tol: float = ENERGY_TOL) -> tuple[bool, str]:
     w = np.asarray(bs["weight"], np.float64).reshape(n, -1)
     w = w * np.asarray(bs["eta"], np.float64)[:, None] ** 2
     w = np.where(np.isfinite(w), w, 0.0)
     a, s = w.mean(0), w.std(0) / math.sqrt(n)
     k = int(np.argmax(a - 4 * s))
-    limit = 1 + ENERGY_TOL + 4 * s[k]
+    limit = 1 + tol + 4 * s[k]
     return a[k] > limit, f"albedo {a[k]:.4f} > {limit:.4f}"
 
 
@@ -211,13 +256,21 @@ def stress_bsdf(h: Harness, c: Counts, sets: list[dict], cos_wis: tuple, n_wo: i
                        **{f"sample.{k}": bs[k] for k in ("wo", "pdf", "weight", "eta")}}
             _tally(c, outputs, ("sample.wo",), where)
             m, why = _mismatches(bs, ev, pd)
+            exempt = mismatch_exempt(h.decl, params, cos_wi)
+            if m and exempt:
+                c.exempt += 1
+                c.note("exempt", f"{exempt} at {where}")
+                m = 0
             c.mismatch += m
             if m:
                 c.note("mismatch", f"mismatch: {why} at {where}")
-            gain, why = _albedo_gain(bs, n)
+            gain, why = _albedo_gain(bs, n, energy_tol(h.decl))
             if gain:
                 c.energy_gain += 1
                 c.note("energy", f"energy gain: {why} at {where}")
+    if c.exempt:
+        c.notes["exempt"] = (f"mismatches not counted in {c.exempt} case(s) where float32 "
+                             f"cannot recover m (MICROFACET), the first: {c.notes['exempt']}")
 
 
 def _emitter_or_texture(h: Harness, params: dict, n: int) -> dict[str, np.ndarray]:
