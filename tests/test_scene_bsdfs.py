@@ -253,11 +253,13 @@ def test_parameter_mapping(tmp_path):
     inst = load_bsdf(tmp_path, '<bsdf type="plastic"><boolean name="nonlinear" value="true"/>'
                      '</bsdf>')
     assert inst.params["nonlinear"] is True
+    # sampling all normals instead of the visible ones converges to the same image: accepted
+    # (tests/compat renders it against Mitsuba)
+    load_bsdf(tmp_path, '<bsdf type="roughplastic"><boolean name="sample_visible" '
+              'value="false"/></bsdf>')
 
 
 @pytest.mark.parametrize("bsdf,words", [
-    ('<bsdf type="roughplastic"><boolean name="sample_visible" value="false"/></bsdf>',
-     "sample_visible"),
     (('<bsdf type="blendbsdf"><float name="weight" value="0.5"/><bsdf type="diffuse"/>'
       '<bsdf type="blendbsdf"><float name="weight" value="0.5"/><bsdf type="diffuse"/>'
       '<bsdf type="blendbsdf"><float name="weight" value="0.5"/><bsdf type="diffuse"/>'
