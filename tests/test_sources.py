@@ -29,7 +29,7 @@ def test_the_rule(tmp_path: Path):
     g.write_text("import warp;\n" + SRC)
     files = source_files(g)
     assert files[0] == g.resolve() and any(p.name == "warp.rdsl" for p in files)
-    assert all(p.parent.name == "stdlib" for p in prelude) and len(prelude) == 2
+    assert all(p.parent.name == "stdlib" for p in prelude) and len(prelude) == 3
 
 
 @pytest.mark.parametrize("entry", ["check", "jit"])

@@ -193,7 +193,7 @@ def test_anisotropic_roughness_of_roughdielectric_from_textures(tmp_path):
     def bsdf(av: str) -> str:
         return plane(f'<bsdf type="roughdielectric"><float name="alpha_u" value="0.05"/>'
                      f'{av}</bsdf>')
-    consts = [render(tmp_path, bsdf(const("alpha_v", av))) for av in (A0, A1)]
+    consts = [render(tmp_path, bsdf(const("alpha_v", av))) for av in (M0, M1)]  # a checkerboard: the mean
     assert_regions(render(tmp_path, bsdf(checker("alpha_v"))), *consts)
 
 
