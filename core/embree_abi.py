@@ -43,13 +43,16 @@ INSTANCE_FIELDS = ("instID", "instPrimID")
 
 # rdsl's user geometries: their kinds, the callbacks generated for them (``rdsl_user_<name>``)
 # and the block of doubles each reads, as (first index, length) in world space
-USER_KINDS = ("sphere", "disk")
+USER_KINDS = ("sphere", "disk", "sdfgrid")
 USER_CALLBACKS = ("bounds", *(f"{k}_{q}" for k in USER_KINDS for q in ("intersect", "occluded")))
 USER_BLOCK_DOUBLES = 24
 USER_BLOCK = {
     "center": (0, 3), "radius": (3, 1),           # sphere
     "to_object": (0, 12), "normal": (12, 3),      # disk: rows of a 3 x 4 matrix, unit normal
-    "lower": (16, 3), "upper": (19, 3),           # both: the bounding box
+    # sdfgrid: the address of its rdsl kernel (stdlib/render/sdfgrid_kernel.rdsl) and of
+    # its record, as int64 bit patterns
+    "kernel": (0, 1), "record": (1, 1),
+    "lower": (16, 3), "upper": (19, 3),           # all: the bounding box
 }
 
 

@@ -1,16 +1,20 @@
-"""Analytic spheres and disks as Embree 4 user geometry, intersected by native callbacks.
+"""Analytic spheres and disks, and SDF grids, as Embree 4 user geometry, intersected by native
+callbacks.
 
-A :class:`UserShape` (from :func:`sphere` or :func:`disk`) holds the block of doubles that its
+A :class:`UserShape` (from :func:`sphere`, :func:`disk` or :func:`sdfgrid`) holds the block of doubles that its
 callbacks read (its ``geometryUserPtr``, laid out by :data:`rdsl.core.embree_abi.USER_BLOCK`,
 world space) and registers itself with Embree through ctypes when an
 :class:`~rdsl.runtime.embree.EmbreeScene` is built.  The callbacks themselves (bounds,
 intersect, occluded; native, so no Python runs per ray) are generated and compiled by the
-backend, ``compiler/backends/llvm_shapes.py``, which hands over their addresses.
+backend, ``compiler/backends/llvm_shapes.py``, which hands over their addresses.  An SDF
+grid's callback calls a kernel written in rdsl (stdlib/render/sdfgrid_kernel.rdsl), compiled
+here once per process (and cached on disk like any kernel).
 """
 
 from __future__ import annotations
 
 import ctypes
+import threading
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -45,6 +49,7 @@ class UserShape:
 
     kind: str  # one of USER_KINDS
     block: np.ndarray = field(repr=False)  # float64[USER_BLOCK_DOUBLES], the callbacks' data
+    keep: tuple[Any, ...] = field(default=(), repr=False)  # what the block's addresses point at
 
     def new_geometry(self, device: EmbreeDevice, what: str) -> int:
         """A committed ``RTCGeometry`` (the caller attaches and releases it)."""
@@ -114,4 +119,39 @@ def disk(to_world: Any) -> UserShape:
                   lower=lower, upper=upper)
 
 
-__all__ = ["UserShape", "disk", "sphere"]
+_sdf_kernel: list[Any] = []  # the compiled module of the SDF grids' kernel, once loaded
+_sdf_lock = threading.Lock()
+
+
+def _sdfgrid_kernel() -> tuple[Any, int]:
+    """The module of stdlib/render/sdfgrid_kernel.rdsl (scalar, mono) and the address of its
+    ``rdsl_sdfgrid_intersect``."""
+    with _sdf_lock:
+        if not _sdf_kernel:
+            from .api import jit
+            from ..dsl.imports import STDLIB
+
+            mod = jit(STDLIB / "render" / "sdfgrid_kernel.rdsl", target="scalar",
+                      variant="mono")
+            fn = mod["sdfgrid_intersect"]._fn
+            _sdf_kernel.extend([mod, ctypes.cast(fn, ctypes.c_void_p).value])
+        return _sdf_kernel[0], _sdf_kernel[1]
+
+
+def sdfgrid(record: np.ndarray, to_world: Any) -> UserShape:
+    """The SDF grid of ``record`` (float32, stdlib/render/sdfgrid.rdsl's layout), the unit
+    cube placed by the affine 4x4 ``to_world``."""
+    m = _finite("to_world", to_world, (4, 4))
+    rec = np.ascontiguousarray(record, np.float32)
+    corners = np.array([[(i >> a) & 1 for a in range(3)] + [1] for i in range(8)], np.float64)
+    world = (corners @ m.T)[:, :3]
+    lower, upper = _padded(world.min(axis=0), world.max(axis=0))
+    mod, kernel = _sdfgrid_kernel()
+    shape = _block("sdfgrid", lower=lower, upper=upper)
+    shape.block[USER_BLOCK["kernel"][0]:USER_BLOCK["record"][0] + 1] = \
+        np.array([kernel, rec.ctypes.data], np.int64).view(np.float64)
+    shape.keep = (rec, mod)
+    return shape
+
+
+__all__ = ["UserShape", "disk", "sdfgrid", "sphere"]

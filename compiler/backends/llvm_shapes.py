@@ -1,4 +1,5 @@
-"""Native callbacks of rdsl's Embree user geometries (analytic spheres and disks), in LLVM IR.
+"""Native callbacks of rdsl's Embree user geometries (analytic spheres and disks, SDF grids),
+in LLVM IR.
 
 Embree calls a user geometry's intersect and occluded callbacks during traversal, from the
 compiled kernels' ``rtcIntersectN``/``rtcOccludedN``.  Those callbacks are generated here as
@@ -12,7 +13,8 @@ Each geometry owns a block of doubles (its ``geometryUserPtr``, laid out by
 
     sphere  [0:3] center, [3] radius
     disk    [0:12] rows of to_object (3 x 4), [12:15] the geometric normal (unit, unflipped)
-    both    [16:19] lower corner of the bounding box, [19:22] upper corner
+    sdfgrid [0] address of its rdsl kernel, [1] address of its record (int64 bit patterns)
+    all     [16:19] lower corner of the bounding box, [19:22] upper corner
 
 The callbacks follow the ``RTCIntersectFunctionNArguments`` / ``RTCOccludedFunctionNArguments``
 ABI of ``embree4/rtcore_geometry.h`` (64-bit):
@@ -30,7 +32,10 @@ double precision, as Mitsuba's sphere intersection on the CPU:
 - sphere: Mitsuba's robust form, which moves the origin to the point of the ray closest to
   the center before solving the quadratic; ``Ng = hit point - center``, ``u = v = 0``;
 - disk: the ray in object space meets z = 0 inside the unit circle; ``u, v`` are the local
-  coordinates x, y of the hit (stdlib/render/geometry.rdsl rebuilds the point from them).
+  coordinates x, y of the hit (stdlib/render/geometry.rdsl rebuilds the point from them);
+- sdfgrid: the callback calls the shape's kernel, written in rdsl
+  (stdlib/render/sdfgrid_kernel.rdsl: a walk over the voxels the ray crosses, Mitsuba's
+  per-voxel root finding); ``u`` = the index of the hit's voxel.
 """
 
 from __future__ import annotations
@@ -92,7 +97,8 @@ def build_module() -> Any:
     """The llvmlite module of the callbacks (``rdsl_user_<name>``, each ``void (ptr)``)."""
     mod = L.Module(name="rdsl_embree_user")
     _bounds_function(mod)
-    for kind, test in (("sphere", _sphere_test), ("disk", _disk_test)):
+    for kind, test in (("sphere", _sphere_test), ("disk", _disk_test),
+                       ("sdfgrid", _sdfgrid_test)):
         for query in ("intersect", "occluded"):
             _query_function(mod, kind, query, test)
     return mod
@@ -186,6 +192,38 @@ def _disk_test(x: _IR, user: Any, o: list[Any], d: list[Any], tnear: Any, tfar: 
     hit = b.and_(b.fcmp_ordered("<=", r2, x.c(x.f64, 1.0)),
                  b.and_(b.fcmp_ordered(">=", t, tnear), b.fcmp_ordered("<=", t, tfar)))
     return hit, t, x.vec(user, USER_BLOCK["normal"][0]), px, py
+
+
+def _sdfgrid_test(x: _IR, user: Any, o: list[Any], d: list[Any], tnear: Any, tfar: Any
+                  ) -> tuple[Any, Any, list[Any], Any, Any]:
+    """(hit, t, Ng, u, v) of the ray against the SDF grid: a call of its rdsl kernel
+    (stdlib/render/sdfgrid_kernel.rdsl, ``rdsl_sdfgrid_intersect``, compiled scalar) on one
+    ray; u = the voxel's index, Ng = (0, 0, 1) (the renderer's kernels take the normal from
+    the grid, not from Embree)."""
+    b = x.b
+    fn = b.function
+    entry = L.IRBuilder(fn.entry_basic_block)
+    entry.position_at_start(fn.entry_basic_block)
+    slots = entry.alloca(x.f32, size=10)  # the kernel's 8 inputs and 2 outputs, one ray
+    for k, value in enumerate(o + d + [tnear, tfar]):
+        b.store(b.fptrunc(value, x.f32), x.at(slots, x.f32, k))
+    record = b.inttoptr(x.load(user, x.i64, USER_BLOCK["record"][0]), x.ptr)
+    args: list[Any] = [x.c(x.i64, 1), record]
+    arg_tys: list[Any] = [x.i64, x.ptr]
+    for k in range(10):  # each array and its byte stride
+        args += [x.at(slots, x.f32, k), x.c(x.i64, 4)]
+        arg_tys += [x.ptr, x.i64]
+    args += [x.c(x.ptr, None), x.c(x.i64, 0)]  # no mask: the one lane is active
+    arg_tys += [x.ptr, x.i64]
+    kernel = b.inttoptr(x.load(user, x.i64, USER_BLOCK["kernel"][0]),
+                        L.FunctionType(L.VoidType(), arg_tys).as_pointer())
+    b.call(kernel, args)
+    t = b.fpext(x.load(slots, x.f32, 8), x.f64)
+    cell = b.fpext(x.load(slots, x.f32, 9), x.f64)
+    hit = b.and_(b.and_(b.fcmp_ordered(">=", t, tnear), b.fcmp_ordered("<=", t, tfar)),
+                 b.fcmp_ordered("<", t, x.c(x.f64, float("inf"))))  # infinity: a miss
+    zero, one = x.c(x.f64, 0.0), x.c(x.f64, 1.0)
+    return hit, t, [zero, zero, one], cell, zero
 
 
 def _query_function(mod: Any, kind: str, query: str, test: Any) -> None:
