@@ -208,6 +208,12 @@ def _primitives(bufs: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarr
             c, r = P[o + 24:o + 27], P[o + 27]
             los.append((c - r)[None])
             his.append((c + r)[None])
+        elif G[s, 3] & 32:  # an SDF grid: the unit cube's image under to_world's rows
+            rows = P[o:o + 12].reshape(3, 4)
+            corners = np.array([[(k >> a) & 1 for a in range(3)] for k in range(8)], float)
+            world = corners @ rows[:, :3].T + rows[:, 3]
+            los.append(world.min(axis=0)[None])
+            his.append(world.max(axis=0)[None])
         else:  # a disk: the unit disk's image under to_world's rows
             rows = P[o:o + 12].reshape(3, 4)
             half = np.hypot(rows[:, 0], rows[:, 1])

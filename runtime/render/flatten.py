@@ -26,7 +26,7 @@ from .colors import spectrum_value
 from .declared import declared_instance
 from .emitters import EmitterTables, emitter_tables
 from .shapes import FLAGS as SHAPE_FLAGS
-from .shapes import INSTANCED, RECORD, instance_record, shape_record, user_geometry
+from .shapes import INSTANCED, instance_record, shape_record, user_geometry
 from .shapes import KINDS as SHAPE_KINDS
 from .textures import TextureTable
 
@@ -147,7 +147,9 @@ class _Flattener:
             # named as Mitsuba's traverse names it (`light.emitter.radiance`)
             self.emitters[-1].name = f"{shape.id or f'shape{shape_index}'}.emitter"
         row = len(self.G)
-        analytic = None if triangulate else shape.analytic
+        analytic = shape.analytic  # an sdfgrid has no triangles to render instead
+        if triangulate and analytic is not None and analytic.kind != "sdfgrid":
+            analytic = None
         if analytic is not None:  # G's first entry is set by finish(), with the records
             self.items.append(user_geometry(analytic))
             self.records.append((row, 0, shape_record(analytic)))
@@ -193,13 +195,14 @@ class _Flattener:
         self.textures.fill_attributes(self.tri_meshes)
         # the records follow the vertices in P; their G entries point at them
         analytic_lights = {}
-        for j, (row, column, record) in enumerate(self.records):
-            offset = 3 * self.nv + RECORD * j
+        offset = 3 * self.nv
+        for row, column, record in self.records:
             self.G[row][column] = offset
             self.P.append(record)
             if row in self.analytic:
                 a = self.analytic[row]
                 analytic_lights[row] = (SHAPE_KINDS[a.kind], offset, a.area)
+            offset += len(record)
 
         def cat(xs: list[np.ndarray], dt: Any) -> np.ndarray:  # never empty: kernels need memory
             return np.ascontiguousarray(np.concatenate(xs) if xs else np.zeros(1, dt), dt)

@@ -7,6 +7,8 @@ Record layout (``RECORD`` floats; geometry.rdsl documents it too):
     [24:27] sphere: center; disk: normal (flip_normals applied)
     [27]    sphere: radius                   [28] +1, or -1 when the normals are flipped
     [29]    surface area
+    sdfgrid: [24:27] its sample counts nx, ny, nz, [30] 1 for smooth normals, and its
+    samples after the record (stdlib/render/sdfgrid.rdsl), so its record is longer
 """
 
 from __future__ import annotations
@@ -15,23 +17,29 @@ import numpy as np
 
 from ..embree_user import UserShape
 from ..embree_user import disk as user_disk
+from ..embree_user import sdfgrid as user_sdfgrid
 from ..embree_user import sphere as user_sphere
 from ..scene.analytic import KINDS, Analytic
 
 RECORD = 32  # floats per analytic shape in P (geometry.rdsl: shape_record_size())
-FLAGS = {"sphere": 4, "disk": 8}  # G's flag bits of the analytic kinds
+FLAGS = {"sphere": 4, "disk": 8, "sdfgrid": 32}  # G's flag bits of the analytic kinds
 INSTANCED = 16  # G's flag bit of a shapegroup's mesh, drawn by an instance
 INSTANCED_KIND = 3  # geometry.rdsl's shape kind of those
 
 
 def shape_record(shape: Analytic) -> np.ndarray:
-    """The shape's record for ``P``."""
+    """The shape's record for ``P`` (an sdfgrid's samples follow it)."""
     m = np.asarray(shape.to_world, np.float64)
-    rec = np.zeros(RECORD)
+    grid = shape.grid if shape.kind == "sdfgrid" else None
+    rec = np.zeros(RECORD + (0 if grid is None else grid.size))
     rec[0:12] = m[:3, :4].reshape(-1)
     rec[12:24] = np.linalg.inv(m)[:3, :4].reshape(-1)
     if shape.kind == "sphere":
         rec[24:27], rec[27] = shape.center, shape.radius
+    elif grid is not None:
+        rec[24:27] = grid.shape[::-1]
+        rec[30] = 1.0 if shape.smooth else 0.0
+        rec[RECORD:] = grid.reshape(-1)
     else:
         rec[24:27] = shape.disk_normal
     rec[28] = -1.0 if shape.flipped else 1.0
@@ -56,6 +64,8 @@ def user_geometry(shape: Analytic) -> UserShape:
     """The Embree user geometry that intersects ``shape``."""
     if shape.kind == "sphere":
         return user_sphere(shape.center, shape.radius)
+    if shape.kind == "sdfgrid":
+        return user_sdfgrid(shape_record(shape), shape.to_world)
     return user_disk(shape.to_world)
 
 

@@ -14,6 +14,9 @@ its triangle mesh instead, which the loader builds for every shape anyway.
 - disk: the unit disk at z = 0 placed by any affine ``to_world`` (an ellipse under a
   non-uniform scale); its normal is ``to_world`` applied to the normal (0, 0, 1), uv = (r,
   phi / 2pi) of the local point, area = pi |dp/du x dp/dv|.
+- sdfgrid: Mitsuba's SDF grid, samples ``grid`` (z, y, x) over the unit cube placed by
+  ``to_world``; ``smooth`` picks Mitsuba's smooth shading normals over the interpolant's
+  gradient (``normals="analytic"``).  No area: it cannot be an emitter (nor in Mitsuba).
 """
 
 from __future__ import annotations
@@ -23,7 +26,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-KINDS = {"sphere": 1, "disk": 2}  # 0: a triangle mesh (geometry.rdsl's shape kinds)
+# 0: a triangle mesh, 3: an instanced one (geometry.rdsl's shape kinds)
+KINDS = {"sphere": 1, "disk": 2, "sdfgrid": 4}
 
 
 @dataclass
@@ -33,6 +37,8 @@ class Analytic:
     kind: str
     to_world: np.ndarray
     flip_normals: bool = False
+    grid: np.ndarray | None = None  # sdfgrid: float32 samples (z, y, x)
+    smooth: bool = True  # sdfgrid: Mitsuba's `normals` = "smooth" (else "analytic")
 
     @property
     def linear(self) -> np.ndarray:
@@ -64,6 +70,8 @@ class Analytic:
     def area(self) -> float:
         if self.kind == "sphere":
             return 4.0 * math.pi * self.radius ** 2
+        if self.kind == "sdfgrid":
+            return 0.0
         return math.pi * float(np.linalg.norm(np.cross(self.linear[:, 0], self.linear[:, 1])))
 
     def uniform_scale_problem(self) -> str | None:

@@ -114,6 +114,34 @@ def dict_to_xml(scene: Mapping[str, Any], registry: Any = None) -> str:
     return "\n".join(lines) + "\n"
 
 
+_grid_dir: list[str] = []  # the folder of the .vol files made from `grid` arrays
+
+
+def _grid_file(value: Any, path: str) -> str:
+    """A ``.vol`` file holding the samples ``value`` (Mitsuba's tensor (z, y, x, 1)), which
+    the sdfgrid reads as its ``filename``; it lasts as long as the process."""
+    import atexit
+    import shutil
+    import tempfile
+
+    from .sdfgrid import check_grid
+    from .volgrid import write_vol
+
+    try:
+        grid = check_grid(np.asarray(value, np.float32), f"load_dict: {path}: the grid")
+    except (TypeError, ValueError) as e:
+        raise _error(str(e) if "load_dict" in str(e) else
+                     f"load_dict: {path}: expected an array of numbers, got "
+                     f"{type(value).__name__}") from None
+    if not _grid_dir:
+        _grid_dir.append(tempfile.mkdtemp(prefix="rdsl-sdfgrid-"))
+        atexit.register(shutil.rmtree, _grid_dir[0], True)
+    fd, name = tempfile.mkstemp(suffix=".vol", dir=_grid_dir[0])
+    os.close(fd)
+    write_vol(name, grid)
+    return name
+
+
 class _Writer:
     def __init__(self, categories: dict[str, str]) -> None:
         self.categories = categories
@@ -129,6 +157,8 @@ class _Writer:
             return [f'{pad}<integer name={quoteattr(key)} value="{int(value)}"/>']
         if isinstance(value, (float, np.floating)):
             return [f'{pad}<float name={quoteattr(key)} value="{float(value)!r}"/>']
+        if key == "grid" and not isinstance(value, (str, os.PathLike)):  # an sdfgrid's samples
+            return [f'{pad}<string name="filename" value={quoteattr(_grid_file(value, path))}/>']
         if isinstance(value, (str, os.PathLike)):
             text = str(value)
             if key == "filename" and not Path(text).is_absolute():

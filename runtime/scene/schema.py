@@ -146,6 +146,11 @@ _SPECS = [
                                    "triangulate": P("boolean", False)}, _SHAPE_CHILDREN),
     PluginSpec("shape", "cylinder", {**_SHAPE, "p0": P("point"), "p1": P("point"),
                                      "radius": P("float", 1.0)}, _SHAPE_CHILDREN),
+    # Mitsuba 3's SDF grid (runtime/scene/sdfgrid.py); load_dict's `grid` becomes a file
+    PluginSpec("shape", "sdfgrid", {"to_world": P("transform"),
+                                    "filename": P("string", REQUIRED),
+                                    "normals": P("string", "smooth", ("analytic", "smooth"))},
+               _SHAPE_CHILDREN),
     PluginSpec("shape", "obj", {**_MESH, "filename": P("string", REQUIRED),
                                 "flip_tex_coords": P("boolean", True)}, _SHAPE_CHILDREN),
     PluginSpec("shape", "ply", {**_MESH, "filename": P("string", REQUIRED),

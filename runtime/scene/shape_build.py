@@ -21,6 +21,7 @@ from .mesh_attributes import check_attributes
 from .meshes import MeshError
 from .nodes import param_loc as _loc
 from .reads import memoized
+from .sdfgrid import box_mesh, load_grid
 from .sensors import attach_meter
 from .xml import ObjectNode
 
@@ -58,6 +59,9 @@ class ShapeFinisher:
                 kind = "an emitter" if child.emitter is not None else "a sensor"
                 raise scene_error(f"shapegroup: a shape with {kind} cannot be instanced (as in "
                                   "Mitsuba 3); declare it outside the shapegroup", ch.loc)
+            if obj.type == "shapegroup" and child.type == "sdfgrid":
+                raise scene_error("shapegroup: rdsl cannot instance an 'sdfgrid' (its groups "
+                                  "hold meshes); declare it outside the shapegroup", ch.loc)
         obj.children = [c for c, _ in shapes]
         if obj.type == "shapegroup":
             for child in obj.children:
@@ -69,6 +73,19 @@ class ShapeFinisher:
                 raise scene_error("instance: 'to_world' is singular or not finite",
                                   _loc(node, "to_world"))
             obj.params["to_world"] = m
+
+    def sdfgrid(self, node: ObjectNode, m: np.ndarray, p: dict) -> Analytic:
+        """An sdfgrid's samples, from its ``filename``, checked."""
+        path = self.file(node, "filename", "grid")
+        try:
+            grid = memoized(path, ("sdfgrid",), lambda: load_grid(path))
+        except (ValueError, OSError) as e:
+            why = e.strerror if isinstance(e, OSError) and e.strerror else str(e)
+            raise scene_error(f"{self.what(node)}: cannot load grid file "
+                              f"'{p['filename']}' ({path}): {why}",
+                              _loc(node, "filename")) from None
+        p["filename"] = str(path)
+        return Analytic("sdfgrid", m, False, grid=grid, smooth=p["normals"] == "smooth")
 
     def finish_shape(self, obj: Shape, node: ObjectNode, objects: dict) -> None:
         if obj.type in GROUPS:
@@ -90,6 +107,9 @@ class ShapeFinisher:
             mesh = getattr(meshes, obj.type)()
         elif obj.type == "cylinder":
             m, mesh = m @ cylinder_frame(p, lambda k: _loc(node, k)), cylinder_mesh()
+        elif obj.type == "sdfgrid":
+            mesh = box_mesh()
+            obj.analytic = self.sdfgrid(node, m, p)
         else:
             path = self.file(node, "filename", "mesh")
             try:
@@ -115,7 +135,7 @@ class ShapeFinisher:
         face_normals = bool(p.get("face_normals") or mesh.face_normals)
         p["to_world"] = m
         try:
-            obj.mesh = meshes.to_world(mesh, m, p["flip_normals"], face_normals)
+            obj.mesh = meshes.to_world(mesh, m, p.get("flip_normals", False), face_normals)
         except MeshError as e:
             raise scene_error(f"{self.what(node)}: {e}", _loc(node, "to_world")) from None
         bsdfs, ems = objects["bsdf"], objects["emitter"]
@@ -127,6 +147,9 @@ class ShapeFinisher:
             if em.type != "area" and em.decl is None:
                 raise scene_error(f"only an 'area' emitter can be attached to a shape, not "
                                   f"'{em.type}'", ch.loc)
+            if obj.type == "sdfgrid":
+                raise scene_error("sdfgrid: cannot be an area emitter (nor in Mitsuba 3)",
+                                  ch.loc)
             obj.emitter = em
         if objects.get("sensor"):
             attach_meter(obj, *objects["sensor"][0])
