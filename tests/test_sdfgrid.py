@@ -255,6 +255,10 @@ def test_bad_grids_name_the_file(tmp_path):
         _load(tmp_path, _sdf("a.vol", '<string name="normals" value="flat"/>'))
     with pytest.raises(SceneError, match="cannot be an area emitter"):
         _load(tmp_path, _sdf("a.vol", '<emitter type="area"/>'))
+    with pytest.raises(SceneError, match="cannot hold a sensor"):
+        _load(tmp_path, _sdf("a.vol", '<sensor type="irradiancemeter"/>'))
+    with pytest.raises(SceneError, match="cannot instance an 'sdfgrid'"):
+        _load(tmp_path, f'<shape type="shapegroup">{_sdf("a.vol")}</shape>')
 
 
 def test_load_dict_grid_becomes_a_vol_file():

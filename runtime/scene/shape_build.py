@@ -152,6 +152,9 @@ class ShapeFinisher:
                                   ch.loc)
             obj.emitter = em
         if objects.get("sensor"):
+            if obj.type == "sdfgrid":  # Mitsuba's samples no position on it either
+                raise scene_error("sdfgrid: cannot hold a sensor (it has no area to sample)",
+                                  objects["sensor"][0][1].loc)
             attach_meter(obj, *objects["sensor"][0])
         problem = check_attributes(obj, f"shape '{obj.id}' ({obj.type})" if obj.id
                                    else f"shape '{obj.type}'")
