@@ -16,6 +16,7 @@ from . import transform as xf
 from .errors import scene_error
 from .mesh_attributes import PREFIXES
 from .nodes import param_loc as _loc
+from .hair import resolve_hair
 from .principled import resolve_principled
 from .samplers import finish_sampler
 from .schema import AOV_TYPES, BITMAP_FORMATS
@@ -42,6 +43,9 @@ class Finishers:
         if obj.type == "principled":
             resolve_principled(p, lambda k: _loc(node, k) is not node.loc, self.what(node),
                                lambda k: _loc(node, k))
+        if obj.type == "hair":
+            resolve_hair(p, lambda k: _loc(node, k) is not node.loc, self.what(node),
+                         lambda k: _loc(node, k))
         if "material" in p:
             given = [k for k in ("eta", "k") if p[k] is not None]
             if given and "material" in node.props:
