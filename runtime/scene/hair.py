@@ -1,7 +1,8 @@
 """What the loader resolves of Mitsuba 3's ``hair`` BSDF (src/bsdfs/hair.cpp): the absorption
 comes from the pigment concentrations or from ``sigma_a``, never both, and the rdsl plugin's
 ``use_pigmentation`` (stdlib/bsdf/hair.rdsl) says which; Mitsuba's range checks of the
-roughnesses and indices of refraction, and (rdsl's own) of the concentrations and scale."""
+roughnesses and of the indices of refraction (they must differ; the ``ior`` kind makes them
+positive), and rdsl's own of the concentrations and scale (not negative)."""
 
 from __future__ import annotations
 
@@ -22,10 +23,6 @@ def resolve_hair(p: dict[str, Any], given: Callable[[str], bool], what: str,
         if not 0.0 <= p[k] <= 1.0:
             raise scene_error(f"{what}: '{k}' is {p[k]:g}; a hair roughness lies in [0, 1]",
                               loc(k))
-    for k in ("int_ior", "ext_ior"):
-        if not p[k] > 0.0:
-            raise scene_error(f"{what}: '{k}' is {p[k]:g}; an index of refraction must be "
-                              "positive", loc(k))
     if p["int_ior"] == p["ext_ior"]:
         raise scene_error(f"{what}: 'int_ior' and 'ext_ior' are both {p['int_ior']:g}; the "
                           "fiber's interior and exterior indices of refraction must differ",
