@@ -13,7 +13,6 @@ differ by up to that much, measured here against numpy's I0."""
 
 from __future__ import annotations
 
-from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
@@ -24,7 +23,11 @@ from _bsdf_harness import SceneBsdfs
 from _mitsuba_render import block_error, mitsuba_variant, render_both, scene_header
 from rdsl.compiler.diagnostics import CompileError
 from rdsl.runtime.scene.loader import load_scene_description
+from rdsl.runtime.testkit.bsdf_checks import check_bsdf
+from rdsl.runtime.testkit.common import Options
 from rdsl.runtime.testkit.harness import Harness
+from rdsl.runtime.testkit.report import PASS, SKIP, table
+from test_principled import _mi_dict, _mitsuba, _scene, _surfaces
 
 f32 = np.float32
 ROOT = Path(__file__).resolve().parents[1]
@@ -41,71 +44,18 @@ CASES: list[tuple[dict[str, Any], bool]] = [
 ]
 
 
-def _xml_value(name: str, value: Any) -> str:
-    if isinstance(value, tuple):
-        return f'<rgb name="{name}" value="{", ".join(map(str, value))}"/>'
-    return f'<float name="{name}" value="{value}"/>'
-
-
-def _scene(tmp_path: Path, cases: list[dict[str, Any]]) -> Path:
-    shapes = "".join('<shape type="sphere"><bsdf type="hair">'
-                     + "".join(_xml_value(k, v) for k, v in case.items())
-                     + "</bsdf></shape>" for case in cases)
-    path = tmp_path / "hair.xml"
-    path.write_text(f'<scene version="3.0.0">{shapes}</scene>')
-    return path
-
-
-def _mi_dict(case: dict[str, Any]) -> dict[str, Any]:
-    out: dict[str, Any] = {"type": "hair"}
-    for k, v in case.items():
-        out[k] = {"type": "rgb", "value": list(v)} if isinstance(v, tuple) else v
-    return out
-
-
-@pytest.fixture(params=["rgb", "spectral"])
-def variant(request) -> Iterator[tuple[str, Any]]:
-    with mitsuba_variant(f"scalar_{request.param}") as mi:
-        yield request.param, mi
-
-
 def _sphere(n: int, seed: int) -> np.ndarray:
     v = np.random.default_rng(seed).normal(size=(n, 3))
     return (v / np.linalg.norm(v, axis=1, keepdims=True)).astype(f32)
 
 
-def _surfaces(wi: np.ndarray) -> dict:
-    n = len(wi)
-    z = np.tile(np.array([0, 0, 1], f32), (n, 1))
-    return {"p": np.zeros((n, 3), f32), "n": z, "sh_n": z, "uv": np.zeros((n, 2), f32),
-            "wi": np.ascontiguousarray(wi, f32), "t": np.ones(n, f32), "valid": np.ones(n, bool)}
-
-
-def _mitsuba(mi: Any, bsdf: Any, wi: np.ndarray, wo: np.ndarray,
-             lam: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
-    """Mitsuba's eval and pdf with the identity shading frame (so that its local frame is
-    the one rdsl's plugin is given)."""
-    ctx = mi.BSDFContext()
-    values, pdfs = [], []
-    for j in range(len(wi)):
-        si = mi.SurfaceInteraction3f()
-        si.p, si.n, si.sh_frame = [0, 0, 0], [0, 0, 1], mi.Frame3f([0, 0, 1])
-        si.wi = [float(x) for x in wi[j]]
-        if lam is not None:
-            si.wavelengths = [float(x) for x in lam[j]]
-        d = [float(x) for x in wo[j]]
-        values.append(np.array(bsdf.eval(ctx, si, d), np.float64).ravel())
-        pdfs.append(float(bsdf.pdf(ctx, si, d)))
-    return np.array(values), np.array(pdfs)
-
-
-def test_eval_and_pdf_match_mitsuba(tmp_path, variant):
+@pytest.mark.parametrize("name", ["rgb", "spectral"])
+def test_eval_and_pdf_match_mitsuba(tmp_path, name):
     """400 pairs per case: wi over the sphere, wo uniform for half of them and drawn by
     rdsl's sample() (where the lobes peak) for the other half. Where every lobe is rough
     (kappa <= 5) within float rounding (5e-4); elsewhere above Mitsuba's by at most its I0
     error (0.7%) and below by no more than rounding."""
-    name, mi = variant
-    bsdfs = SceneBsdfs(_scene(tmp_path, [c for c, _ in CASES]), name)
+    bsdfs = SceneBsdfs(_scene(tmp_path, [("hair", c) for c, _ in CASES]), name)
     n = 400
     wi = _sphere(n, 3)
     for k, (case, rough) in enumerate(CASES):
@@ -118,7 +68,8 @@ def test_eval_and_pdf_match_mitsuba(tmp_path, variant):
         lam = h.wavelengths(n)
         ours_f = np.asarray(h.eval(_surfaces(wi), wo), np.float64).reshape(n, -1)
         ours_p = np.asarray(h.pdf(_surfaces(wi), wo), np.float64)
-        theirs_f, theirs_p = _mitsuba(mi, mi.load_dict(_mi_dict(case)), wi, wo, lam)
+        with mitsuba_variant(f"scalar_{name}") as mi:
+            theirs_f, theirs_p = _mitsuba(mi, mi.load_dict(_mi_dict(case, "hair")), wi, wo, lam)
         assert ours_f.shape == theirs_f.shape and (theirs_p > 0).all(), case
         # Mitsuba's I0 errs low only: rdsl's values lie in [1 - 5e-4, 1 + up] times its
         up = 5e-4 if rough else 7e-3
@@ -178,62 +129,64 @@ def test_white_furnace(variant):
         np.testing.assert_allclose(w, 1.0, rtol=2e-5)
 
 
-# the test kit's -p options: Mitsuba's defaults, no absorption (and smooth), a light rough one
-MIXES = [
-    [],
-    ["use_pigmentation=false", "sigma_a=0", "longitudinal_roughness=0.1",
-     "azimuthal_roughness=0.6", "scale_tilt=5"],
-    ["eumelanin=0.3", "pheomelanin=0.8", "longitudinal_roughness=0.6",
-     "azimuthal_roughness=0.2", "int_ior=1.4"],
+# the test kit's parameters: Mitsuba's defaults, no absorption (and smooth), a light rough one
+MIXES: list[dict[str, Any]] = [
+    {},
+    {"use_pigmentation": False, "sigma_a": 0.0, "longitudinal_roughness": 0.1,
+     "azimuthal_roughness": 0.6, "scale_tilt": 5.0},
+    {"eumelanin": 0.3, "pheomelanin": 0.8, "longitudinal_roughness": 0.6,
+     "azimuthal_roughness": 0.2, "int_ior": 1.4},
 ]
 KIT_RUNS = [("rgb", m) for m in range(len(MIXES))] + [
     (v, 0) for v in ("mono", "spectral", "mono_polarized", "spectral_polarized")]
 
 
 @pytest.mark.parametrize("variant,mix", KIT_RUNS, ids=[f"{v}-{m}" for v, m in KIT_RUNS])
-def test_passes_the_test_kit(capsys, variant: str, mix: int):
-    """`rdsl test-plugin stdlib/bsdf/hair.rdsl -p ...`: chi-square of sample() against pdf()
-    (from above and below), weight == eval / pdf, pdf == pdf(), the albedo at most 1, finite
-    values at grazing angles and extreme parameters (reciprocity is skipped: the model is
-    not reciprocal)."""
-    from rdsl.cli import main
-
-    args = [a for p in MIXES[mix] for a in ("-p", p)]
-    rc = main(["test-plugin", str(ROOT / "stdlib" / "bsdf" / "hair.rdsl"), *args,
-               "--variant", variant, "--samples", "100000"])
-    out = capsys.readouterr().out
-    assert rc == 0 and " FAIL" not in out, out
-    assert out.count("chi2 sample vs pdf") >= 5 and "weight == eval/pdf" in out, out
+def test_passes_the_test_kit(variant: str, mix: int):
+    """The test kit's checks (`rdsl test-plugin`): chi-square of sample() against pdf() at
+    five incident angles (from above and below), weight == eval / pdf, pdf == pdf(), the
+    albedo at most 1, finite values at grazing angles and extreme parameters; reciprocity is
+    skipped, the model not being reciprocal."""
+    rows = check_bsdf(Harness("hair", variant), Options(samples=100_000, params=MIXES[mix]))
+    assert not [r for r in rows if r.failed], table(rows)
+    assert sum(r.check == "chi2 sample vs pdf" and r.status == PASS for r in rows) == 5
+    assert [r.status for r in rows if r.check == "reciprocity"] == [SKIP]
 
 
-@pytest.mark.parametrize("body,line,message", [
-    ('<float name="longitudinal_roughness" value="-0.1"/>', 4,
+# (the hair's properties, one a line from line 4 of the file; the line of the error; message)
+BAD = [
+    (['<float name="longitudinal_roughness" value="-0.1"/>'], 4,
      "'longitudinal_roughness' is -0.1; a hair roughness lies in [0, 1]"),
-    ('<float name="azimuthal_roughness" value="1.5"/>', 4,
+    (['<float name="azimuthal_roughness" value="1.5"/>'], 4,
      "'azimuthal_roughness' is 1.5; a hair roughness lies in [0, 1]"),
-    ('<rgb name="sigma_a" value="0.2, 0.3, 0.4"/><float name="eumelanin" value="0.5"/>', 5,
-     "give either 'sigma_a' or the pigment concentrations"),
-    ('<float name="int_ior" value="1.00028"/>', 4, "indices of refraction must differ"),
-    ('<float name="ext_ior" value="-1"/>', 4, "'ext_ior' must be a positive index of refraction"),
-    ('<float name="pheomelanin" value="-2"/>', 4, "'pheomelanin' is -2; it must be >= 0"),
-    ('<string name="scale_tilt" value="2"/>', 4,
+    (['<rgb name="sigma_a" value="0.2, 0.3, 0.4"/>', '<float name="eumelanin" value="0.5"/>'],
+     5, "give either 'sigma_a' or the pigment concentrations"),
+    (['<float name="int_ior" value="1.00028"/>'], 4, "indices of refraction must differ"),
+    (['<float name="ext_ior" value="-1"/>'], 4,
+     "'ext_ior' must be a positive index of refraction"),
+    (['<float name="pheomelanin" value="-2"/>'], 4, "'pheomelanin' is -2; it must be >= 0"),
+    (['<string name="scale_tilt" value="2"/>'], 4,
      "parameter 'scale_tilt' of bsdf 'hair' expects a float"),
-    ('<float name="beta_m" value="0.3"/>', 4, "unknown parameter 'beta_m' of bsdf 'hair'"),
-])
-def test_bad_parameters_are_errors_at_their_line(tmp_path, body, line, message):
+    (['<float name="beta_m" value="0.3"/>'], 4, "unknown parameter 'beta_m' of bsdf 'hair'"),
+]
+
+
+@pytest.mark.parametrize("props,line,message", BAD, ids=[m.split(";")[0] for _, _, m in BAD])
+def test_bad_parameters_are_errors_at_their_line(tmp_path, props, line, message):
+    lines = ['<scene version="3.0.0">', '<shape type="sphere">', '<bsdf type="hair">', *props,
+             "</bsdf></shape></scene>"]
     path = tmp_path / "bad.xml"
-    path.write_text('<scene version="3.0.0">\n<shape type="sphere">\n'
-                    '<bsdf type="hair">\n' + body.replace("/><", "/>\n<")
-                    + '\n</bsdf></shape></scene>')
+    path.write_text("\n".join(lines))
     with pytest.raises(CompileError) as e:
         load_scene_description(path)
-    assert f"{path}:{line}:" in str(e.value) and message in str(e.value), str(e.value)
+    text = str(e.value)
+    assert text.startswith(f"{path}:{line}:") and message in text, text
 
 
 def test_loader_resolves_the_absorption(tmp_path):
     """Mitsuba's switch: sigma_a given means no pigments; otherwise its default pigments."""
-    path = _scene(tmp_path, [{}, {"sigma_a": (0.1, 0.2, 0.3), "scale": 3.0},
-                             {"pheomelanin": 0.7}])
+    path = _scene(tmp_path, [("hair", c) for c in ({}, {"sigma_a": (0.1, 0.2, 0.3),
+                                                         "scale": 3.0}, {"pheomelanin": 0.7})])
     shapes = load_scene_description(path).shapes
     p = [s.bsdf.params for s in shapes]
     assert p[0]["use_pigmentation"] and (p[0]["eumelanin"], p[0]["pheomelanin"]) == (1.3, 0.2)

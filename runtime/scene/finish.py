@@ -14,9 +14,9 @@ import numpy as np
 
 from . import transform as xf
 from .errors import scene_error
+from .hair import resolve_hair
 from .mesh_attributes import PREFIXES
 from .nodes import param_loc as _loc
-from .hair import resolve_hair
 from .principled import resolve_principled
 from .samplers import finish_sampler
 from .schema import AOV_TYPES, BITMAP_FORMATS
