@@ -270,11 +270,18 @@ HAIR = cases(
             '<float name="scale_tilt" value="6"/>',
             '<float name="eumelanin" value="0.5"/>',
         ],
+        "sigma_a_texture": [bitmap("sigma_a"), '<float name="scale" value="1.5"/>'],
         "ior_string": [
             '<string name="int_ior" value="water"/>',
             '<float name="eumelanin" value="0.8"/>',
         ],
     },
+)
+
+# the absorption upsampled (the pigments' and sigma_a's colours, as reflectances)
+HAIR_SPECTRAL = (
+    Case("hair.spectral.default", bsdf("hair")),
+    Case("hair.spectral.sigma_a", bsdf("hair", '<rgb name="sigma_a" value="0.2, 0.25, 0.7"/>')),
 )
 
 # anisotropic roughdielectric, on a sheet of its own (once an xfail case, kept as it was so
@@ -302,5 +309,6 @@ BSDF_SHEETS: list[Sheet] = [
     Sheet("roughdielectric.alpha_uv", ROUGHDIELECTRIC_ALPHA_UV),
     Sheet("plastic", PLASTIC + ROUGHPLASTIC + PPLASTIC, cols=4),
     Sheet("principled", PRINCIPLED + PRINCIPLEDTHIN, cols=4),
-    Sheet("hair", HAIR, cols=3),
+    Sheet("hair", HAIR, cols=4),
+    Sheet("hair.spectral", HAIR_SPECTRAL, variant="spectral"),
 ]
