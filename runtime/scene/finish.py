@@ -14,6 +14,7 @@ import numpy as np
 
 from . import transform as xf
 from .errors import scene_error
+from .hair import resolve_hair
 from .mesh_attributes import PREFIXES
 from .nodes import param_loc as _loc
 from .principled import resolve_principled
@@ -42,6 +43,9 @@ class Finishers:
         if obj.type == "principled":
             resolve_principled(p, lambda k: _loc(node, k) is not node.loc, self.what(node),
                                lambda k: _loc(node, k))
+        if obj.type == "hair":
+            resolve_hair(p, lambda k: _loc(node, k) is not node.loc, self.what(node),
+                         lambda k: _loc(node, k))
         if "material" in p:
             given = [k for k in ("eta", "k") if p[k] is not None]
             if given and "material" in node.props:

@@ -197,6 +197,12 @@ _SPECS = [
             "diffuse_transmittance")},
         **{k: P("ftex", 0.0) for k in _PRINCIPLED_LOBES
            if k not in ("metallic", "clearcoat", "clearcoat_gloss")}}),
+    # Mitsuba 3's hair (Chiang et al. 2016): the pigments or sigma_a, not both (hair.py)
+    PluginSpec("bsdf", "hair", {
+        "eumelanin": P("float"), "pheomelanin": P("float"), "sigma_a": P("color"),
+        "scale": P("float", 1.0), "int_ior": P("ior", "amber"), "ext_ior": P("ior", "air"),
+        "longitudinal_roughness": P("float", 0.3), "azimuthal_roughness": P("float", 0.3),
+        "scale_tilt": P("float", 2.0)}),
     # a pass-through (Mitsuba's null.cpp): light goes straight on, as mask's share
     PluginSpec("bsdf", "null", {}),
     PluginSpec("bsdf", "twosided", {}, {"bsdf": (1, 2)}),

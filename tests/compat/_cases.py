@@ -248,6 +248,42 @@ PPLASTIC = cases(
     },
 )
 
+# Chiang et al.'s hair on spheres (the fibers along the meridians: the shading frame's y)
+HAIR = cases(
+    "hair",
+    {
+        "default": [],
+        "pigments": [
+            '<float name="eumelanin" value="0.2"/>',
+            '<float name="pheomelanin" value="0.4"/>',
+        ],
+        "sigma_a": [
+            '<rgb name="sigma_a" value="0.2, 0.25, 0.7"/>',
+            '<float name="scale" value="2"/>',
+        ],
+        "rough": [
+            '<float name="longitudinal_roughness" value="0.7"/>',
+            '<float name="azimuthal_roughness" value="0.6"/>',
+        ],
+        "smooth_tilt": [
+            '<float name="longitudinal_roughness" value="0.1"/>',
+            '<float name="scale_tilt" value="6"/>',
+            '<float name="eumelanin" value="0.5"/>',
+        ],
+        "sigma_a_texture": [bitmap("sigma_a"), '<float name="scale" value="1.5"/>'],
+        "ior_string": [
+            '<string name="int_ior" value="water"/>',
+            '<float name="eumelanin" value="0.8"/>',
+        ],
+    },
+)
+
+# the absorption upsampled (the pigments' and sigma_a's colours, as reflectances)
+HAIR_SPECTRAL = (
+    Case("hair.spectral.default", bsdf("hair")),
+    Case("hair.spectral.sigma_a", bsdf("hair", '<rgb name="sigma_a" value="0.2, 0.25, 0.7"/>')),
+)
+
 # anisotropic roughdielectric, on a sheet of its own (once an xfail case, kept as it was so
 # that its reference image still applies)
 ROUGHDIELECTRIC_ALPHA_UV = (
@@ -273,4 +309,6 @@ BSDF_SHEETS: list[Sheet] = [
     Sheet("roughdielectric.alpha_uv", ROUGHDIELECTRIC_ALPHA_UV),
     Sheet("plastic", PLASTIC + ROUGHPLASTIC + PPLASTIC, cols=4),
     Sheet("principled", PRINCIPLED + PRINCIPLEDTHIN, cols=4),
+    Sheet("hair", HAIR, cols=4),
+    Sheet("hair.spectral", HAIR_SPECTRAL, variant="spectral"),
 ]
