@@ -192,6 +192,11 @@ _SPECS = [
             "diffuse_transmittance")},
         **{k: P("ftex", 0.0) for k in _PRINCIPLED_LOBES
            if k not in ("metallic", "clearcoat", "clearcoat_gloss")}}),
+    # a measured pBRDF (Baek et al. 2020) from a tensor file (core/tensorfile.py); Mitsuba
+    # requires `wavelength` outside spectral variants
+    PluginSpec("bsdf", "measured_polarized", {"filename": P("string", REQUIRED),
+                                              "alpha_sample": P("float", 0.1),
+                                              "wavelength": P("float", -1.0)}),
     # a pass-through (Mitsuba's null.cpp): light goes straight on, as mask's share
     PluginSpec("bsdf", "null", {}),
     PluginSpec("bsdf", "twosided", {}, {"bsdf": (1, 2)}),
