@@ -54,7 +54,7 @@ class Finishers:
         if obj.decl is not None:  # a user plugin: its params are its own, not Mitsuba's
             return
         if obj.type == "measured_polarized":
-            path = self.file(node, "filename", "pBRDF file")
+            path = self.file(node, "filename", "pBRDF")
             p["filename"], p["table"] = str(path), _read_pbrdf(path, _loc(node, "filename"))
         if obj.type == "principled":
             resolve_principled(p, lambda k: _loc(node, k) is not node.loc, self.what(node),
