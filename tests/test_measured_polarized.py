@@ -17,11 +17,11 @@ types, no wavelength in rgb) as errors naming the file and the XML line."""
 from __future__ import annotations
 
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
 from _mitsuba_render import block_error, mitsuba_variant, scene_header
-
 from rdsl.core.tensorfile import read_pbrdf, read_tensor_file, write_tensor_file
 from rdsl.tools.gen_pbrdf import synthetic_pbrdf, write
 
@@ -42,18 +42,18 @@ def pbrdf_nan(tmp_path_factory) -> Path:
 def _harness(variant: str, path: Path):
     """The plugin through the scene dispatch in ``variant``, with the table of ``path`` in
     `T` as the renderer stores it, and its parameters."""
-    from rdsl.runtime.testkit.harness import Harness
-    from rdsl.runtime.render.textures import TextureTable
     from rdsl.runtime.render.measured import measured_instance
+    from rdsl.runtime.render.textures import TextureTable
+    from rdsl.runtime.testkit.harness import Harness
 
-    class Plugin:  # what the loader hands the renderer
-        type, id, loc, children = "measured_polarized", None, None, []
-        params = {"filename": str(path), "table": read_pbrdf(path), "wavelength": -1.0,
-                  "alpha_sample": 0.2}
+    # what the loader hands the renderer
+    plugin = SimpleNamespace(type="measured_polarized", id=None, loc=None, children=[],
+                             params={"filename": str(path), "table": read_pbrdf(path),
+                                     "wavelength": -1.0, "alpha_sample": 0.2})
 
     textures = TextureTable()
     textures.floats("something before", np.arange(7, dtype=f32))  # the table is not first
-    params = dict(measured_instance(Plugin, textures).params)
+    params = dict(measured_instance(plugin, textures).params)
     h = Harness("measured_polarized", variant)
     h.T = textures.buffer()
     return h, params

@@ -21,7 +21,7 @@ from ...core.color import RGB, ColorModel
 from ...core.scene_spec import Instance
 from ..embree_instance import EmbreeGroup, EmbreeInstance
 from ..scene import meshes as scene_meshes
-from .bsdfs import scene_bsdfs, bsdf_instance
+from .bsdfs import bsdf_instance, scene_bsdfs
 from .colors import spectrum_value
 from .declared import declared_instance
 from .emitters import EmitterTables, emitter_tables

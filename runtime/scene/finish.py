@@ -15,7 +15,6 @@ import numpy as np
 
 from ...compiler.ir import Loc
 from ...core.tensorfile import PBrdf, TensorFileError, read_pbrdf
-
 from . import transform as xf
 from .errors import scene_error
 from .mesh_attributes import PREFIXES
