@@ -306,6 +306,15 @@ def test_bad_files_are_errors_naming_the_file(tmp_path: Path, case: str, message
     assert f"{scene}:{line}:" in err and str(target.name) in err and message in err, err
 
 
+def test_alpha_sample_must_be_positive(pbrdf, tmp_path: Path):
+    scene = tmp_path / "scene.xml"
+    extra = '<float name="alpha_sample" value="0"/>'
+    scene.write_text(SCENE.format(file=pbrdf, extra=extra, theta=0))
+    line = 1 + next(i for i, s in enumerate(scene.read_text().splitlines()) if extra in s)
+    err = _load_error(scene)
+    assert f"{scene}:{line}:" in err and "'alpha_sample' is 0" in err, err
+
+
 def test_rgb_needs_a_wavelength(pbrdf, tmp_path: Path):
     scene = tmp_path / "scene.xml"
     scene.write_text(SCENE.format(file=pbrdf, extra="", theta=0))

@@ -55,6 +55,10 @@ class Finishers:
         if obj.type == "measured_polarized":
             path = self.file(node, "filename", "pBRDF")
             p["filename"], p["table"] = str(path), _read_pbrdf(path, _loc(node, "filename"))
+            if not p["alpha_sample"] > 0.0:  # its GGX sampling would give NaN pdfs
+                raise scene_error(f"{self.what(node)}: 'alpha_sample' is {p['alpha_sample']:g}; "
+                                  "the roughness of its importance sampling must be > 0",
+                                  _loc(node, "alpha_sample"))
         if obj.type == "principled":
             resolve_principled(p, lambda k: _loc(node, k) is not node.loc, self.what(node),
                                lambda k: _loc(node, k))
