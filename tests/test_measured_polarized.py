@@ -122,6 +122,18 @@ def test_spectral_polarized_eval_matches_mitsuba(pbrdf, pbrdf_nan, nan):
         assert polarizing > N // 3 and zero == 0, (polarizing, zero)
 
 
+def test_degenerate_configurations_are_finite(pbrdf):
+    """Where the Rusinkiewicz angle phi_d or the plane of reflection is undefined (the exact
+    mirror direction: h = n; light sent back along its way: wo = wi), Mitsuba's lookup is
+    NaN and it returns 0 or NaN; rdsl picks an angle there and returns the table's value,
+    finite, with a positive intensity."""
+    h, params = _harness("spectral_polarized", pbrdf)
+    wi = np.array([[0, 0, 1], [0.6, 0, 0.8], [0.6, 0, 0.8], [0, 0.28, 0.96]], f32)
+    wo = np.array([[0, 0, 1], [-0.6, 0, 0.8], [0.6, 0, 0.8], [0, -0.28, 0.96]], f32)
+    m = h.eval(_surfaces(wi), wo, mueller=True, **params)
+    assert np.isfinite(m).all() and (m[:, 0, 0] > 0.01).all(), m
+
+
 @pytest.mark.parametrize("variant", ["spectral_polarized", "mono_polarized"])
 def test_fixed_wavelength_matches_mitsuba(pbrdf, variant):
     """`wavelength` = 520 nm: the table at that wavelength, whatever the sample's."""
