@@ -22,6 +22,8 @@ n_theta_d, n_theta_h, n_wvls, 4, 4): the Mueller matrix of the BRDF at every gri
 
 from __future__ import annotations
 
+import mmap
+import os
 import struct
 from dataclasses import dataclass
 from pathlib import Path
@@ -43,8 +45,10 @@ class TensorFileError(ValueError):
 def read_tensor_file(path: str | Path) -> dict[str, np.ndarray]:
     """Every field of the tensor file at ``path``, by name (read-only arrays)."""
     path = Path(path)
-    try:
-        data = path.read_bytes()
+    try:  # mapped, not read: a measured file is hundreds of MB, of which T keeps one copy
+        with open(path, "rb") as f:
+            data = mmap.mmap(f.fileno(), 0, access=mmap.ACCESS_READ) \
+                if os.fstat(f.fileno()).st_size else b""
     except OSError as e:
         raise TensorFileError(f"cannot read tensor file '{path}': {e.strerror}") from None
     if len(data) < 18 or data[:12] != MAGIC:
