@@ -42,6 +42,7 @@ from ..plugins import INTERNAL, stdlib_names, stdlib_plugin
 from ..scene.schema import ANY_TEXTURE, spec_for
 from .colors import spectrum_value
 from .declared import declared_instance
+from .measured import measured_instance
 
 COMBINATORS = ("twosided", "blendbsdf", "mask")  # Mitsuba's, all rdsl's `mixture`
 # Mitsuba's, rdsl's `perturbed`: outermost, or alone in a twosided
@@ -57,7 +58,7 @@ UNPOLARIZED_BEHAVIOUR = {
     "retarder": "fully transparent: it transmits all light unchanged"}
 
 
-def _scene_bsdfs(desc: Any) -> Iterator[Any]:
+def scene_bsdfs(desc: Any) -> Iterator[Any]:
     """Every distinct BSDF plugin of the scene's shapes, nested ones included."""
     todo = [shape.bsdf for shape in desc.shapes if getattr(shape, "bsdf", None) is not None]
     seen: set[int] = set()
@@ -74,7 +75,7 @@ def polarization_warnings(desc: Any, model: ColorModel) -> list[str]:
     if model.polarized:
         return []
     out = []
-    for plugin in _scene_bsdfs(desc):
+    for plugin in scene_bsdfs(desc):
         if plugin.type in UNPOLARIZED_BEHAVIOUR and getattr(plugin, "decl", None) is None:
             out.append(f"{plugin.loc or desc.path}: warning: {_where(plugin)} has no effect on "
                        f"polarization in the unpolarized `{model.name}` variant; it acts as "
@@ -88,7 +89,7 @@ def dispersion_warnings(desc: Any, model: ColorModel) -> list[str]:
     if model.spectral:
         return []
     out = []
-    for plugin in _scene_bsdfs(desc):
+    for plugin in scene_bsdfs(desc):
         if getattr(plugin, "decl", None) is None and (plugin.params.get("int_cauchy_b")
                                     or plugin.params.get("ext_cauchy_b")):
             out.append(f"{plugin.loc or desc.path}: warning: {_where(plugin)} is dispersive "
@@ -144,6 +145,8 @@ def leaf_instance(plugin: Any, textures: Any = None) -> Instance:
     """One non-combinator BSDF."""
     if getattr(plugin, "decl", None) is not None:
         return declared_instance(plugin, textures)
+    if plugin.type == "measured_polarized":
+        return measured_instance(plugin, textures)
     if stdlib_plugin("bsdf", plugin.type) is None or plugin.type in INTERNAL:
         supported = ", ".join(sorted([*stdlib_names("bsdf"), *COMBINATORS, *PERTURBED]))
         raise CompileError(f"bsdf `{plugin.type}` is not supported by the renderer yet "

@@ -21,10 +21,11 @@ from ...core.color import RGB, ColorModel
 from ...core.scene_spec import Instance
 from ..embree_instance import EmbreeGroup, EmbreeInstance
 from ..scene import meshes as scene_meshes
-from .bsdfs import bsdf_instance
+from .bsdfs import bsdf_instance, scene_bsdfs
 from .colors import spectrum_value
 from .declared import declared_instance
 from .emitters import EmitterTables, emitter_tables
+from .measured import check_measured_variant
 from .shapes import FLAGS as SHAPE_FLAGS
 from .shapes import INSTANCED, instance_record, shape_record, user_geometry
 from .shapes import KINDS as SHAPE_KINDS
@@ -250,6 +251,7 @@ def flatten(desc: Any, triangulate: bool = False, model: ColorModel = RGB,
     Colours in buffers are stored as ``model`` reads them (runtime/render/colors.py)."""
     if not instancing:
         _check_copies(desc.shapes)
+    check_measured_variant(scene_bsdfs(desc), model)
     fl = _Flattener(model)
     for shape_index, shape in enumerate(desc.shapes):
         if shape.type != "instance":

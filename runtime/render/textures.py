@@ -108,6 +108,7 @@ class TextureTable:
         self._texels: list[tuple[np.ndarray, bool]] = []  # (texels, encoded as a colour)
         self._count = 0
         self._attributes: list[tuple[Instance, Any, str]] = []  # mesh_attribute instances
+        self._tables: dict[Any, int] = {}  # key -> index in T of a BSDF's table (floats())
 
     def fill_attributes(self, meshes: list[tuple[int, Any, Any]]) -> None:
         """Store the values of the mesh_attribute textures for ``meshes``, (first triangle,
@@ -133,6 +134,17 @@ class TextureTable:
             inst.params.update(offset=self._count, first=lo, count=hi - lo)
             self._texels.append((values.reshape(-1), usage != "scalar"))
             self._count += len(values)
+
+    def floats(self, key: Any, values: np.ndarray) -> int:
+        """The index in ``T`` of raw float32 ``values`` (a BSDF's table), stored once per
+        ``key``; padded to whole texels so that later offsets stay in texels."""
+        if key not in self._tables:
+            v = np.asarray(values, np.float32).reshape(-1)
+            v = np.concatenate([v, np.zeros(-len(v) % 3, np.float32)])
+            self._tables[key] = 3 * self._count
+            self._texels.append((v, False))
+            self._count += len(v) // 3
+        return self._tables[key]
 
     def ref(self, plugin: Any, what: str, usage: str = "colour") -> TextureRef:
         """The reference for texture ``plugin`` setting ``what``, a parameter of ``usage``

@@ -8,16 +8,20 @@ collected; it uses the builder's ``what``, ``file`` and ``default``.
 
 from __future__ import annotations
 
+from pathlib import Path
 from typing import TYPE_CHECKING
 
 import numpy as np
 
+from ...compiler.ir import Loc
+from ...core.tensorfile import PBrdf, TensorFileError, read_pbrdf
 from . import transform as xf
 from .errors import scene_error
 from .hair import resolve_hair
 from .mesh_attributes import PREFIXES
 from .nodes import param_loc as _loc
 from .principled import resolve_principled
+from .reads import memoized
 from .samplers import finish_sampler
 from .schema import AOV_TYPES, BITMAP_FORMATS
 from .sensors import METERS, finish_sensor
@@ -32,6 +36,15 @@ if TYPE_CHECKING:
 MAX_CAUCHY_B = 1.0
 
 
+def _read_pbrdf(path: Path, loc: Loc | None) -> PBrdf:
+    """The pBRDF table of ``path`` (a reload reuses an unchanged file's), or an error naming
+    the file and what is wrong with it, at the XML's ``filename``."""
+    try:
+        return memoized(path, "pbrdf", lambda: read_pbrdf(path))
+    except TensorFileError as e:
+        raise scene_error(f"measured_polarized: {e}", loc) from None
+
+
 class Finishers:
     """``finish_<category>`` of every category but shapes (a mixin of the loader's builder)."""
 
@@ -40,6 +53,13 @@ class Finishers:
         obj.children = [b for b, _ in objects.get("bsdf", [])]
         if obj.decl is not None:  # a user plugin: its params are its own, not Mitsuba's
             return
+        if obj.type == "measured_polarized":
+            path = self.file(node, "filename", "pBRDF")
+            p["filename"], p["table"] = str(path), _read_pbrdf(path, _loc(node, "filename"))
+            if not p["alpha_sample"] > 0.0:  # its GGX sampling would give NaN pdfs
+                raise scene_error(f"{self.what(node)}: 'alpha_sample' is {p['alpha_sample']:g}; "
+                                  "the roughness of its importance sampling must be > 0",
+                                  _loc(node, "alpha_sample"))
         if obj.type == "principled":
             resolve_principled(p, lambda k: _loc(node, k) is not node.loc, self.what(node),
                                lambda k: _loc(node, k))

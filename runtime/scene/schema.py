@@ -2,8 +2,7 @@
 
 A parameter's ``kind`` says which XML values it accepts:
 
-============  ===================================================================
-``float``     ``<float>`` (an ``<integer>`` is promoted, as in Mitsuba)
+============  ============================================================``float``     ``<float>`` (an ``<integer>`` is promoted, as in Mitsuba)
 ``integer``   ``<integer>``
 ``boolean``   ``<boolean>``
 ``string``    ``<string>``
@@ -20,8 +19,7 @@ A parameter's ``kind`` says which XML values it accepts:
 ``spectrum``  ``<float>``, ``<rgb>`` or ``<spectrum>`` (a ``Spectrum`` param of a user plugin)
 ``vec3``      ``<vector>``, ``<point>`` or ``<rgb>`` (a ``Vec3`` param of a user plugin)
 ``unset``     nothing: a param the scene cannot set (``Vec2``, ``Vec4`` of a user plugin)
-============  ===================================================================
-
+============  ============================================================
 User plugins (runtime/plugins.py) get a :class:`PluginSpec` made from their ``param``
 declarations, whose ``decl`` fields say where the plugin and each param are declared.
 
@@ -203,6 +201,11 @@ _SPECS = [
         "scale": P("float", 1.0), "int_ior": P("ior", "amber"), "ext_ior": P("ior", "air"),
         "longitudinal_roughness": P("float", 0.3), "azimuthal_roughness": P("float", 0.3),
         "scale_tilt": P("float", 2.0)}),
+    # a measured pBRDF (Baek et al. 2020) from a tensor file (core/tensorfile.py); Mitsuba
+    # requires `wavelength` outside spectral variants
+    PluginSpec("bsdf", "measured_polarized", {"filename": P("string", REQUIRED),
+                                              "alpha_sample": P("float", 0.1),
+                                              "wavelength": P("float", -1.0)}),
     # a pass-through (Mitsuba's null.cpp): light goes straight on, as mask's share
     PluginSpec("bsdf", "null", {}),
     PluginSpec("bsdf", "twosided", {}, {"bsdf": (1, 2)}),

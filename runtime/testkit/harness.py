@@ -186,6 +186,8 @@ class Harness:
         self.model = MODELS[variant]
         self.polarized, self.spectral = self.model.polarized, self.model.spectral
         self._mods: dict[str, Any] = {}
+        # the scene's texel buffer `T` the kernels get (a table a BSDF reads from it)
+        self.T = np.zeros(1, f32)
 
     # -- compilation ---------------------------------------------------------------------
     def _params(self, params: dict[str, Any]) -> dict[str, Any]:
@@ -226,7 +228,7 @@ class Harness:
         ul = default_ul(n) if ul is None else np.broadcast_to(np.asarray(ul, f32), (n,))
         extra = [prm] if any(p["name"] == "PRM" for p in k.info["params"]) else []
         return k(np.full(n, self.ident, np.int32), *args, np.ascontiguousarray(ul),
-                 np.zeros(1, f32), *extra)
+                 np.ascontiguousarray(self.T, f32), *extra)
 
     # -- the plugin's interface ----------------------------------------------------------
     def _split(self, value: Any) -> tuple[np.ndarray, np.ndarray | None]:
