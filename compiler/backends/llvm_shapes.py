@@ -95,7 +95,53 @@ def build_module() -> Any:
     for kind, test in (("sphere", _sphere_test), ("disk", _disk_test)):
         for query in ("intersect", "occluded"):
             _query_function(mod, kind, query, test)
+    _backface_filter(mod)
     return mod
+
+
+def _backface_filter(mod: Any) -> None:
+    """``rdsl_user_backface_filter``: an Embree filter function that rejects the hits whose
+    geometric normal faces along the ray (runtime/embree_curves.py sets it on curves:
+    Mitsuba's Embree is built with EMBREE_BACKFACE_CULLING_CURVES, embreex's is not).
+
+    RTCFilterFunctionNArguments: int* valid @0, void* geometryUserPtr @8, context @16,
+    RTCRayN* ray @24, RTCHitN* hit @32, uint N @40; row k of the ray or the hit holds lane
+    i at index ``k * N + i``."""
+    fn = L.Function(mod, L.FunctionType(L.VoidType(), [L.PointerType()]),
+                    "rdsl_user_backface_filter")
+    entry, head, body, nxt, done = (fn.append_basic_block(s)
+                                    for s in ("entry", "head", "body", "next", "done"))
+    b = L.IRBuilder(entry)
+    x = _IR(b)
+    args = fn.args[0]
+    valid, rays, hits = x.byte(args, x.ptr, 0), x.byte(args, x.ptr, 24), x.byte(args, x.ptr, 32)
+    n = b.zext(x.byte(args, x.i32, 40), x.i64)
+    b.branch(head)
+
+    b.position_at_end(head)
+    i = b.phi(x.i64, name="i")
+    i.add_incoming(x.c(x.i64, 0), entry)
+    b.cbranch(b.icmp_unsigned("<", i, n), body, done)
+
+    b.position_at_end(body)
+
+    def row(base: Any, k: int) -> Any:
+        return x.load(base, x.f32, b.add(b.mul(x.c(x.i64, k), n), i))
+
+    d = [row(rays, RAY_FIELDS.index(f"dir_{a}")) for a in "xyz"]
+    ng = [row(hits, HIT_FIELDS.index(f"Ng_{a}")) for a in "xyz"]
+    facing = b.fadd(b.fadd(b.fmul(d[0], ng[0]), b.fmul(d[1], ng[1])), b.fmul(d[2], ng[2]))
+    back = b.fcmp_ordered(">", facing, x.c(x.f32, 0.0))
+    slot = x.at(valid, x.i32, i)
+    b.store(b.select(back, x.c(x.i32, 0), b.load(slot, typ=x.i32)), slot)
+    b.branch(nxt)
+
+    b.position_at_end(nxt)
+    i.add_incoming(b.add(i, x.c(x.i64, 1)), nxt)
+    b.branch(head)
+
+    b.position_at_end(done)
+    b.ret_void()
 
 
 class _IR:

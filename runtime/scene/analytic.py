@@ -23,7 +23,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-KINDS = {"sphere": 1, "disk": 2}  # 0: a triangle mesh (geometry.rdsl's shape kinds)
+# geometry.rdsl's shape kinds: 0 a triangle mesh, 3 an instanced one, 4 and 5 the curves
+KINDS = {"sphere": 1, "disk": 2, "linearcurve": 4, "bsplinecurve": 5}
 
 
 @dataclass
