@@ -239,3 +239,21 @@ def test_the_rdsl_bvh_refuses_curves(tmp_path):
     path = write_scene(tmp_path, shapes(), room=False)
     with pytest.raises(CompileError, match=r"cannot trace curves.*--accel embree"):
         rdsl.load_scene(path, accel="bvh")
+
+
+def test_curve_file_layout(tmp_path):
+    """Tabs, CRLF line ends and runs of blank lines read as Mitsuba reads them: a blank line
+    ends a curve; each curve's segments start at its points but the last (1 or 3)."""
+    from rdsl.runtime.scene.curves import read_curves
+
+    path = tmp_path / "c.txt"
+    path.write_text("\r\n0\t0 0 0.1\r\n1 0 0 0.1\r\n\r\n\r\n  2 0 0 0.2\r\n3 0 0 0.2\r\n"
+                    "4 1 0 0.2\r\n5 1 1 0.2\r\n\r\n")
+    linear = read_curves("linearcurve", path)
+    assert linear.points.shape == (6, 4)
+    assert linear.points[2].tolist() == pytest.approx([2, 0, 0, 0.2])
+    assert linear.segments.tolist() == [0, 2, 3, 4]
+    with pytest.raises(ValueError, match="a bsplinecurve needs at least 4"):
+        read_curves("bsplinecurve", path)
+    path.write_text("0 0 0 1\n1 0 0 1\n2 1 0 1\n3 1 1 1\n4 0 0 1\n")
+    assert read_curves("bsplinecurve", path).segments.tolist() == [0, 1]
