@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from _mitsuba_render import mitsuba_variant
-from _plugin_scenes import check_bad, median_rmse, perspective, write_scene
+from _plugin_scenes import check_bad, median_rmse, write_scene
 from rdsl.runtime.scene import SceneError, load_scene_description
 
 # two linear curves (one bent, one straight) and one B-spline of five points (two segments)
@@ -213,14 +213,14 @@ def test_empty_and_missing_curve_files(tmp_path):
 
 
 BAD = {
-    "emitter": ('<shape type="linearcurve"><string name="filename" value="c.txt"/>'
-                '<emitter type="area"/></shape>',
-                "linearcurve: cannot hold emitter 'area' (a point on a curve cannot be "
-                "sampled"),
+    "emitter": (('<shape type="linearcurve"><string name="filename" value="c.txt"/>'
+                 '<emitter type="area"/></shape>'),
+                ("linearcurve: cannot hold emitter 'area' (a point on a curve cannot be "
+                 "sampled")),
     "no_file": ('<shape type="bsplinecurve"/>',
                 "shape 'bsplinecurve' is missing the required parameter 'filename'"),
-    "shapegroup": ('<shape type="shapegroup"><shape type="linearcurve">'
-                   '<string name="filename" value="c.txt"/></shape></shape>',
+    "shapegroup": (('<shape type="shapegroup"><shape type="linearcurve">'
+                    '<string name="filename" value="c.txt"/></shape></shape>'),
                    "shapegroup: cannot hold a nested 'linearcurve' shape"),
 }
 

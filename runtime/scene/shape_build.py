@@ -12,10 +12,10 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from ...compiler.ir import Loc
 from . import meshes
 from . import transform as xf
 from .analytic import Analytic
-from ...compiler.ir import Loc
 from .curves import CURVE_TYPES, CurveError, read_curves
 from .cylinder import cylinder_frame, cylinder_mesh
 from .errors import file_loc, scene_error
