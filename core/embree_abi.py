@@ -44,7 +44,9 @@ INSTANCE_FIELDS = ("instID", "instPrimID")
 # rdsl's user geometries: their kinds, the callbacks generated for them (``rdsl_user_<name>``)
 # and the block of doubles each reads, as (first index, length) in world space
 USER_KINDS = ("sphere", "disk", "sdfgrid")
-USER_CALLBACKS = ("bounds", *(f"{k}_{q}" for k in USER_KINDS for q in ("intersect", "occluded")))
+# ... and the filter that culls the back faces of curves, as Mitsuba's Embree build does
+USER_CALLBACKS = ("bounds", *(f"{k}_{q}" for k in USER_KINDS for q in ("intersect", "occluded")),
+                  "backface_filter")
 USER_BLOCK_DOUBLES = 24
 USER_BLOCK = {
     "center": (0, 3), "radius": (3, 1),           # sphere

@@ -215,8 +215,8 @@ def test_error_quotes_line_with_caret(tmp_path: Path) -> None:
         load(path)
     lines = str(exc.value).splitlines()
     assert lines[0] == (f"{path}:2:3: error: unknown shape plugin 'torus'; accepted: rectangle, "
-                        "cube, disk, sphere, cylinder, obj, ply, serialized, "
-                        "shapegroup, instance, merge")
+                        "cube, disk, sphere, cylinder, linearcurve, bsplinecurve, obj, "
+                        "ply, serialized, shapegroup, instance, merge")
     assert lines[1].strip() == '<shape type="torus"/>'
     assert lines[2].index("^") == lines[1].index("<")
 

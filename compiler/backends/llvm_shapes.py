@@ -101,7 +101,37 @@ def build_module() -> Any:
                        ("sdfgrid", _sdfgrid_test)):
         for query in ("intersect", "occluded"):
             _query_function(mod, kind, query, test)
+    _backface_filter(mod)
     return mod
+
+
+def _backface_filter(mod: Any) -> None:
+    """``rdsl_user_backface_filter``: an Embree filter function that rejects the hits whose
+    geometric normal faces along the ray (runtime/embree_curves.py sets it on curves:
+    Mitsuba's Embree is built with EMBREE_BACKFACE_CULLING_CURVES, embreex's is not).
+
+    RTCFilterFunctionNArguments: int* valid @0, void* geometryUserPtr @8, context @16,
+    RTCRayN* ray @24, RTCHitN* hit @32, uint N @40; row k of the ray or the hit holds lane
+    i at index ``k * N + i``."""
+    fn = L.Function(mod, L.FunctionType(L.VoidType(), [L.PointerType()]),
+                    "rdsl_user_backface_filter")
+
+    def lane(x: _IR, args: Any, i: Any, n: Any, nxt: Any) -> None:
+        b = x.b
+        rays, hits = x.byte(args, x.ptr, 24), x.byte(args, x.ptr, 32)
+
+        def row(base: Any, k: int) -> Any:
+            return x.load(base, x.f32, b.add(b.mul(x.c(x.i64, k), n), i))
+
+        d = [row(rays, RAY_FIELDS.index(f"dir_{a}")) for a in "xyz"]
+        ng = [row(hits, HIT_FIELDS.index(f"Ng_{a}")) for a in "xyz"]
+        facing = b.fadd(b.fadd(b.fmul(d[0], ng[0]), b.fmul(d[1], ng[1])), b.fmul(d[2], ng[2]))
+        slot = x.at(x.byte(args, x.ptr, 0), x.i32, i)
+        back = b.fcmp_ordered(">", facing, x.c(x.f32, 0.0))
+        b.store(b.select(back, x.c(x.i32, 0), b.load(slot, typ=x.i32)), slot)
+        b.branch(nxt)
+
+    _lane_loop(fn, 40, lane)
 
 
 class _IR:
@@ -226,20 +256,17 @@ def _sdfgrid_test(x: _IR, user: Any, o: list[Any], d: list[Any], tnear: Any, tfa
     return hit, t, [zero, zero, one], cell, zero
 
 
-def _query_function(mod: Any, kind: str, query: str, test: Any) -> None:
-    fn = L.Function(mod, L.FunctionType(L.VoidType(), [L.PointerType()]),
-                    f"rdsl_user_{kind}_{query}")
-    entry, head, body, lane, found, nxt, done = (
-        fn.append_basic_block(s) for s in ("entry", "head", "body", "lane", "found", "next",
-                                           "done"))
+def _lane_loop(fn: Any, count_offset: int, lane: Any) -> None:
+    """The body of callback ``fn``: for each of the packet's N lanes (N the uint at byte
+    ``count_offset`` of the arguments) whose ``valid`` entry (the int* at byte 0) is set,
+    ``lane(x, args, i, n, nxt)`` emits the lane's code, which ends by branching to ``nxt``."""
+    entry, head, body, work, nxt, done = (
+        fn.append_basic_block(s) for s in ("entry", "head", "body", "lane", "next", "done"))
     b = L.IRBuilder(entry)
     x = _IR(b)
     args = fn.args[0]
-    valid, user = x.byte(args, x.ptr, 0), x.byte(args, x.ptr, 8)
-    prim, context = x.byte(args, x.i32, 16), x.byte(args, x.ptr, 24)
-    rays, n32 = x.byte(args, x.ptr, 32), x.byte(args, x.i32, 40)
-    geom = x.byte(args, x.i32, 44)
-    n = b.zext(n32, x.i64)
+    valid = x.byte(args, x.ptr, 0)
+    n = b.zext(x.byte(args, x.i32, count_offset), x.i64)
     b.branch(head)
 
     b.position_at_end(head)
@@ -249,41 +276,10 @@ def _query_function(mod: Any, kind: str, query: str, test: Any) -> None:
 
     b.position_at_end(body)
     active = b.icmp_signed("!=", x.load(valid, x.i32, i), x.c(x.i32, 0))
-    b.cbranch(active, lane, nxt)
+    b.cbranch(active, work, nxt)
 
-    b.position_at_end(lane)
-
-    def slot(row: int, ty: Any) -> Any:  # lane i of row `row` (ray rows, then hit rows)
-        return x.at(rays, ty, b.add(b.mul(x.c(x.i64, row), n), i))
-
-    def ray(name: str) -> Any:
-        return b.fpext(b.load(slot(RAY_FIELDS.index(name), x.f32), typ=x.f32), x.f64)
-
-    o = [ray(f"org_{a}") for a in "xyz"]
-    d = [ray(f"dir_{a}") for a in "xyz"]
-    tnear, tfar = ray("tnear"), ray("tfar")
-    hit, t, ng, u, v = test(x, user, o, d, tnear, tfar)
-    b.cbranch(hit, found, nxt)
-
-    b.position_at_end(found)
-    tfar_slot = slot(RAY_FIELDS.index("tfar"), x.f32)
-    if query == "occluded":
-        b.store(x.c(x.f32, float("-inf")), tfar_slot)
-    else:
-        b.store(b.fptrunc(t, x.f32), tfar_slot)
-
-        def put(name: str, value: Any, ty: Any) -> None:
-            b.store(value, slot(len(RAY_FIELDS) + HIT_FIELDS.index(name), ty))
-
-        for a, comp in zip("xyz", ng):
-            put(f"Ng_{a}", b.fptrunc(comp, x.f32), x.f32)
-        put("u", b.fptrunc(u, x.f32), x.f32)
-        put("v", b.fptrunc(v, x.f32), x.f32)
-        put("primID", prim, x.i32)
-        put("geomID", geom, x.i32)
-        put("instID", x.load(context, x.i32, 0), x.i32)  # context->instID[0]
-        put("instPrimID", x.c(x.i32, -1), x.i32)
-    b.branch(nxt)
+    b.position_at_end(work)
+    lane(x, args, i, n, nxt)
 
     b.position_at_end(nxt)
     i.add_incoming(b.add(i, x.c(x.i64, 1)), nxt)
@@ -291,6 +287,52 @@ def _query_function(mod: Any, kind: str, query: str, test: Any) -> None:
 
     b.position_at_end(done)
     b.ret_void()
+
+
+def _query_function(mod: Any, kind: str, query: str, test: Any) -> None:
+    fn = L.Function(mod, L.FunctionType(L.VoidType(), [L.PointerType()]),
+                    f"rdsl_user_{kind}_{query}")
+
+    def lane(x: _IR, args: Any, i: Any, n: Any, nxt: Any) -> None:
+        b = x.b
+        found = fn.append_basic_block("found")
+        user, prim = x.byte(args, x.ptr, 8), x.byte(args, x.i32, 16)
+        context, rays = x.byte(args, x.ptr, 24), x.byte(args, x.ptr, 32)
+        geom = x.byte(args, x.i32, 44)
+
+        def slot(row: int, ty: Any) -> Any:  # lane i of row `row` (ray rows, then hit rows)
+            return x.at(rays, ty, b.add(b.mul(x.c(x.i64, row), n), i))
+
+        def ray(name: str) -> Any:
+            return b.fpext(b.load(slot(RAY_FIELDS.index(name), x.f32), typ=x.f32), x.f64)
+
+        o = [ray(f"org_{a}") for a in "xyz"]
+        d = [ray(f"dir_{a}") for a in "xyz"]
+        tnear, tfar = ray("tnear"), ray("tfar")
+        hit, t, ng, u, v = test(x, user, o, d, tnear, tfar)
+        b.cbranch(hit, found, nxt)
+
+        b.position_at_end(found)
+        tfar_slot = slot(RAY_FIELDS.index("tfar"), x.f32)
+        if query == "occluded":
+            b.store(x.c(x.f32, float("-inf")), tfar_slot)
+        else:
+            b.store(b.fptrunc(t, x.f32), tfar_slot)
+
+            def put(name: str, value: Any, ty: Any) -> None:
+                b.store(value, slot(len(RAY_FIELDS) + HIT_FIELDS.index(name), ty))
+
+            for a, comp in zip("xyz", ng):
+                put(f"Ng_{a}", b.fptrunc(comp, x.f32), x.f32)
+            put("u", b.fptrunc(u, x.f32), x.f32)
+            put("v", b.fptrunc(v, x.f32), x.f32)
+            put("primID", prim, x.i32)
+            put("geomID", geom, x.i32)
+            put("instID", x.load(context, x.i32, 0), x.i32)  # context->instID[0]
+            put("instPrimID", x.c(x.i32, -1), x.i32)
+        b.branch(nxt)
+
+    _lane_loop(fn, 40, lane)
 
 
 __all__ = ["build_module", "callback_addresses"]

@@ -19,6 +19,7 @@ import numpy as np
 from ...compiler.diagnostics import CompileError
 from ...core.color import RGB, ColorModel
 from ...core.scene_spec import Instance
+from ..embree_curves import EmbreeCurves
 from ..embree_instance import EmbreeGroup, EmbreeInstance
 from ..scene import meshes as scene_meshes
 from .bsdfs import bsdf_instance, scene_bsdfs
@@ -105,6 +106,7 @@ class _Flattener:
         # (G row, G column, record) of the records that follow the vertices in P
         self.records: list[tuple[int, int, np.ndarray]] = []
         self.analytic: dict[int, Any] = {}  # G row -> Analytic, of the area-lit ones
+        self.curves: list[tuple[int, Any]] = []  # (G row, Curves)
         self.items: list[Any] = []  # Embree's: (vertices, faces), user shapes, instances
         # id(shapegroup) -> (its Embree group, its meshes' (first triangle, bsdf, flags))
         self.groups: dict[int, tuple[EmbreeGroup, list[tuple[int, int, int]]]] = {}
@@ -148,6 +150,12 @@ class _Flattener:
             # named as Mitsuba's traverse names it (`light.emitter.radiance`)
             self.emitters[-1].name = f"{shape.id or f'shape{shape_index}'}.emitter"
         row = len(self.G)
+        if shape.curves is not None:  # G's first entry is set by finish(), with the curves
+            c = shape.curves
+            self.items.append(EmbreeCurves(c.kind, c.points, c.segments))
+            self.curves.append((row, c))
+            self.G.append(np.array([-1, bsdf, emitter, SHAPE_FLAGS[c.kind]], np.int32))
+            return
         analytic = shape.analytic  # an sdfgrid has no triangles to render instead
         if triangulate and analytic is not None and analytic.kind != "sdfgrid":
             analytic = None
@@ -192,6 +200,24 @@ class _Flattener:
             self.records.append((len(self.G), 2, record))
             self.G.append(np.array([first, bsdf, 0, flags], np.int32))
 
+    def curve_data(self, p_offset: int) -> None:
+        """Each curve shape's control points at the end of P and, at the end of F, its
+        segment count, control point count and each segment's offset in P of its first
+        control point (geometry.rdsl); G's first entry is the offset of those in F."""
+        f_offset = 3 * self.nt
+        for row, c in self.curves:
+            entries = np.r_[len(c.segments), len(c.points),
+                            p_offset + 4 * c.segments.astype(np.int64)]
+            entries = np.r_[entries, np.zeros(-len(entries) % 3, np.int64)]  # F: triples
+            if p_offset + 4 * len(c.points) >= 2**31:
+                raise CompileError("the scene's curves are too large for 32-bit offsets",
+                                   None)
+            self.G[row][0] = f_offset
+            self.P.append(c.points.reshape(-1))
+            self.F.append(entries.astype(np.int32))
+            p_offset += 4 * len(c.points)
+            f_offset += len(entries)
+
     def finish(self, desc: Any) -> SceneBuffers:
         self.textures.fill_attributes(self.tri_meshes)
         # the records follow the vertices in P; their G entries point at them
@@ -204,6 +230,8 @@ class _Flattener:
                 a = self.analytic[row]
                 analytic_lights[row] = (SHAPE_KINDS[a.kind], offset, a.area)
             offset += len(record)
+
+        self.curve_data(offset)  # after the records, which vary in length (sdfgrid)
 
         def cat(xs: list[np.ndarray], dt: Any) -> np.ndarray:  # never empty: kernels need memory
             return np.ascontiguousarray(np.concatenate(xs) if xs else np.zeros(1, dt), dt)
@@ -251,6 +279,11 @@ def flatten(desc: Any, triangulate: bool = False, model: ColorModel = RGB,
     Colours in buffers are stored as ``model`` reads them (runtime/render/colors.py)."""
     if not instancing:
         _check_copies(desc.shapes)
+        curved = next((s for s in desc.shapes if s.curves is not None), None)
+        if curved is not None:
+            raise CompileError(f"the rdsl BVH (--accel bvh) cannot trace curves (shape "
+                               f"'{curved.type}'); render on the CPU with Embree "
+                               "(--accel embree)", curved.loc)
     check_measured_variant(scene_bsdfs(desc), model)
     fl = _Flattener(model)
     for shape_index, shape in enumerate(desc.shapes):

@@ -22,7 +22,8 @@ from ..embree_user import sphere as user_sphere
 from ..scene.analytic import KINDS, Analytic
 
 RECORD = 32  # floats per analytic shape in P (geometry.rdsl: shape_record_size())
-FLAGS = {"sphere": 4, "disk": 8, "sdfgrid": 32}  # G's flag bits of the analytic kinds
+# G's flag bits of the analytic kinds, the SDF grid and the curves (runtime/scene/curves.py)
+FLAGS = {"sphere": 4, "disk": 8, "sdfgrid": 32, "linearcurve": 64, "bsplinecurve": 128}
 INSTANCED = 16  # G's flag bit of a shapegroup's mesh, drawn by an instance
 INSTANCED_KIND = 3  # geometry.rdsl's shape kind of those
 

@@ -26,8 +26,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-# 0: a triangle mesh, 3: an instanced one (geometry.rdsl's shape kinds)
-KINDS = {"sphere": 1, "disk": 2, "sdfgrid": 4}
+# geometry.rdsl's shape kinds: 0 a triangle mesh, 3 an instanced one, 4 an SDF grid, 5 and 6
+# the curves
+KINDS = {"sphere": 1, "disk": 2, "sdfgrid": 4, "linearcurve": 5, "bsplinecurve": 6}
 
 
 @dataclass

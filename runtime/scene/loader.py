@@ -28,6 +28,7 @@ from ..plugins import KINDS as PLUGIN_KINDS
 from ..plugins import PluginDecl, PluginRegistry, scene_spec, stdlib_names
 from . import transform as xf
 from .analytic import Analytic
+from .curves import Curves
 from .errors import scene_error
 from .finish import Finishers
 from .meshes import Mesh
@@ -81,6 +82,7 @@ class Shape(Plugin):
     mesh: Mesh | None = None
     # a sphere or disk, intersected and shaded exactly (None: render the mesh)
     analytic: Analytic | None = None
+    curves: Curves | None = None  # a linearcurve or bsplinecurve (then mesh is None)
     bsdf: Plugin | None = None
     emitter: Plugin | None = None
     sensor: Sensor | None = None  # an irradiancemeter nested in it

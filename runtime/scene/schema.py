@@ -149,6 +149,9 @@ _SPECS = [
                                     "filename": P("string", REQUIRED),
                                     "normals": P("string", "smooth", ("analytic", "smooth"))},
                _SHAPE_CHILDREN),
+    # curves (runtime/scene/curves.py): Mitsuba's curve files, Embree's round curves
+    *(PluginSpec("shape", t, {"to_world": P("transform"), "filename": P("string", REQUIRED)},
+                 _SHAPE_CHILDREN) for t in ("linearcurve", "bsplinecurve")),
     PluginSpec("shape", "obj", {**_MESH, "filename": P("string", REQUIRED),
                                 "flip_tex_coords": P("boolean", True)}, _SHAPE_CHILDREN),
     PluginSpec("shape", "ply", {**_MESH, "filename": P("string", REQUIRED),

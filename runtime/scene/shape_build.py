@@ -12,11 +12,13 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from ...compiler.ir import Loc
 from . import meshes
 from . import transform as xf
 from .analytic import Analytic
+from .curves import CURVE_TYPES, CurveError, read_curves
 from .cylinder import cylinder_frame, cylinder_mesh
-from .errors import scene_error
+from .errors import file_loc, scene_error
 from .mesh_attributes import check_attributes
 from .meshes import MeshError
 from .nodes import param_loc as _loc
@@ -54,6 +56,10 @@ class ShapeFinisher:
                                               and child.type in GROUPS):
                 raise scene_error(f"{obj.type}: cannot hold {what} (rdsl instances one level "
                                   "deep: give the shapegroup's shapes directly)", ch.loc)
+            if obj.type == "shapegroup" and child.curves is not None:
+                raise scene_error(f"shapegroup: cannot hold {what} (rdsl instances triangle "
+                                  "meshes only; declare the curves outside the shapegroup)",
+                                  ch.loc)
             if obj.type == "shapegroup" and (child.emitter is not None
                                              or child.sensor is not None):
                 kind = "an emitter" if child.emitter is not None else "a sensor"
@@ -96,6 +102,9 @@ class ShapeFinisher:
         if xf.singular(m):
             raise scene_error(f"{self.what(node)}: 'to_world' is singular or not finite",
                               _loc(node, "to_world"))
+        if obj.type in CURVE_TYPES:
+            self.finish_curves(obj, node, objects, m)
+            return
         if obj.type == "sphere":
             if p["radius"] <= 0:
                 raise scene_error("sphere: 'radius' must be positive", _loc(node, "radius"))
@@ -138,6 +147,34 @@ class ShapeFinisher:
             obj.mesh = meshes.to_world(mesh, m, p.get("flip_normals", False), face_normals)
         except MeshError as e:
             raise scene_error(f"{self.what(node)}: {e}", _loc(node, "to_world")) from None
+        self.attach(obj, objects)
+
+    def finish_curves(self, obj: Shape, node: ObjectNode, objects: dict, m: np.ndarray) -> None:
+        """A linearcurve's or bsplinecurve's control points, read from its file and placed by
+        ``to_world``; an emitter or sensor on it is refused (Mitsuba 3 cannot sample a point
+        on a curve either: its curves have no ``sample_position``)."""
+        path = self.file(node, "filename", "curve")
+        try:
+            curves = memoized(path, (obj.type,), lambda: read_curves(obj.type, path))
+        except CurveError as e:
+            loc = Loc(str(path), e.line, 1) if e.line else file_loc(str(path))
+            raise scene_error(f"{obj.type}: cannot load curve file '{obj.params['filename']}'"
+                              f": {e}", loc) from None
+        except OSError as e:
+            raise scene_error(f"{obj.type}: cannot read curve file "
+                              f"'{obj.params['filename']}': {e.strerror}",
+                              _loc(node, "filename")) from None
+        obj.params["filename"], obj.params["to_world"] = str(path), m
+        obj.curves = curves.with_transform(m)
+        for kind in ("emitter", "sensor"):
+            if objects.get(kind):
+                plugin, ch = objects[kind][0]
+                raise scene_error(f"{obj.type}: cannot hold {kind} '{plugin.type}' (a point on "
+                                  "a curve cannot be sampled, in Mitsuba 3 as in rdsl)", ch.loc)
+        self.attach(obj, objects)
+
+    def attach(self, obj: Shape, objects: dict) -> None:
+        """The shape's BSDF, area emitter and irradiancemeter, checked."""
         bsdfs, ems = objects["bsdf"], objects["emitter"]
         # Mitsuba's default (shape.cpp): diffuse, black on an emitter's shape
         obj.bsdf = bsdfs[0][0] if bsdfs else self.default(
@@ -175,6 +212,8 @@ def drawn_shapes(shape: Shape) -> list[Shape]:
 def shape_points(shape: Shape) -> np.ndarray:
     """Points whose bounding box is the shape's (world space): its vertices, or for an
     instance the corners of its shapegroup's box, transformed."""
+    if shape.curves is not None:
+        return shape.curves.bounds_points()
     if shape.type != "instance":
         return shape.mesh.vertices
     group = shape.children[0].children
