@@ -13,6 +13,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from . import transform as xf
+from .camera import finish_projector
 from .errors import scene_error
 from .mesh_attributes import PREFIXES
 from .nodes import param_loc as _loc
@@ -105,6 +106,8 @@ class Finishers:
             p["to_world"] = xf.translate(p["position"])
         if obj.type == "point":
             p["position"] = p["to_world"][:3, 3].copy()
+        if obj.type == "projector":
+            finish_projector(p, lambda k: _loc(node, k))
         if obj.type == "spot" and p["beam_width"] is None:
             p["beam_width"] = p["cutoff_angle"] * 0.75
         if obj.type == "directional":

@@ -224,6 +224,12 @@ _SPECS = [
                                           "direction": P("vector"),
                                           "to_world": P("transform")}),
     PluginSpec("emitter", "constant", {"radiance": P("color", 1.0)}),
+    # fov from `fov`/`fov_axis` or `focal_length` and the irradiance texture's aspect ratio
+    # (a constant's is 1), as Mitsuba's parse_fov
+    PluginSpec("emitter", "projector", {"irradiance": P("color", 1.0), "scale": P("float", 1.0),
+                                        "to_world": P("transform"), "fov": P("float"),
+                                        "fov_axis": _CAMERA["fov_axis"],
+                                        "focal_length": P("string")}),
     PluginSpec("emitter", "envmap", {"filename": P("string", REQUIRED), "scale": P("float", 1.0),
                                      "to_world": P("transform"),
                                      "filter_type": P("string", "bilinear",
