@@ -192,7 +192,11 @@ class Finishers:
 
     def finish_rfilter(self, obj: Plugin, node: ObjectNode, objects: dict) -> None:
         for k, v in obj.params.items():
-            if v <= 0:
+            if k in ("B", "C"):  # mitchell's: any finite value (Catmull-Rom is B = 0)
+                if not np.isfinite(v):
+                    raise scene_error(f"rfilter '{obj.type}': '{k}' must be finite",
+                                      _loc(node, k))
+            elif v <= 0:
                 raise scene_error(f"rfilter '{obj.type}': '{k}' must be positive", _loc(node, k))
 
     def finish_sampler(self, obj: Plugin, node: ObjectNode, objects: dict) -> None:
