@@ -32,6 +32,19 @@ ROOM = """
   <emitter type="constant"><rgb name="radiance" value="0.3, 0.3, 0.3"/></emitter>"""
 
 
+def write_slide(path: Path, height: int = 16, width: int = 16, background: int = 0) -> Path:
+    """An 8-bit PNG to project, asymmetric so that a flip shows: the left half red, the top
+    half green, a blue rectangle in the middle, over ``background``."""
+    import numpy as np
+    from PIL import Image
+
+    x = np.full((height, width, 3), background, np.uint8)
+    x[:, :width // 2, 0], x[:height // 2, :, 1] = 255, 200
+    x[height // 4:3 * height // 4, width // 4:3 * width // 4, 2] = 255
+    Image.fromarray(x).save(path)
+    return path
+
+
 def write_scene(tmp_path: Path, body: str, sensor: str | None = None, max_depth: int = 4,
                 integrator: str | None = None, name: str = "scene.xml",
                 room: bool = True) -> Path:

@@ -7,8 +7,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from _plugin_scenes import check_bad, median_rmse, perspective, write_scene
-from PIL import Image
+from _plugin_scenes import check_bad, median_rmse, perspective, write_scene, write_slide
 
 pytest.importorskip("rdsl.runtime.embree")
 pytest.importorskip("mitsuba")
@@ -26,10 +25,8 @@ IRRADIANCE = {
 
 
 def _scene(tmp_path, irradiance: str, fov: str = '<float name="fov" value="35"/>'):
-    x = np.full((12, 24, 3), 40, np.uint8)
-    x[:, :8, 0], x[:6, :, 1], x[3:9, 10:20, 2] = 255, 200, 255
-    Image.fromarray(x).save(tmp_path / "slide.png")
-    irr = IRRADIANCE[irradiance].format(png=tmp_path / "slide.png")
+    png = write_slide(tmp_path / "slide.png", 12, 24, background=40)
+    irr = IRRADIANCE[irradiance].format(png=png)
     body = f"""<shape type="rectangle"><transform name="to_world"><scale value="2"/></transform>
     <bsdf type="diffuse"><rgb name="reflectance" value="0.8, 0.8, 0.8"/></bsdf></shape>
   <shape type="sphere"><float name="radius" value="0.3"/>

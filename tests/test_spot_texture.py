@@ -3,10 +3,8 @@ the local direction) onto a wall, rendered by rdsl and by Mitsuba 3 (scalar_rgb)
 
 from __future__ import annotations
 
-import numpy as np
 import pytest
-from _plugin_scenes import median_rmse, perspective, write_scene
-from PIL import Image
+from _plugin_scenes import median_rmse, perspective, write_scene, write_slide
 
 pytest.importorskip("rdsl.runtime.embree")
 pytest.importorskip("mitsuba")
@@ -22,10 +20,7 @@ TEXTURES = {
 
 @pytest.mark.parametrize("texture", sorted(TEXTURES))
 def test_textured_spot_against_mitsuba(tmp_path, texture):
-    x = np.zeros((16, 16, 3), np.uint8)
-    x[:, :8, 0], x[:8, :, 1], x[4:12, 4:12, 2] = 255, 200, 255
-    Image.fromarray(x).save(tmp_path / "slide.png")
-    tex = TEXTURES[texture].format(png=tmp_path / "slide.png")
+    tex = TEXTURES[texture].format(png=write_slide(tmp_path / "slide.png"))
     body = f"""<shape type="rectangle"><transform name="to_world"><scale value="2"/></transform>
     <bsdf type="diffuse"><rgb name="reflectance" value="0.8, 0.8, 0.8"/></bsdf></shape>
   <emitter type="spot"><rgb name="intensity" value="20, 20, 20"/>
