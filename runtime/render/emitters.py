@@ -156,7 +156,9 @@ def _emitter_row(em: Any, what: str, model: ColorModel = RGB, textures: Any = No
             if cutoff >= np.pi / 2:
                 raise CompileError(f"{what}: a projected 'texture' needs a 'cutoff_angle' below "
                                    "90 degrees", em.loc)
-            row[19] = textures.ref(tex, f"{what}: 'texture'", "emitted").index + 1
+            # a reflectance-like lookup (no D65 in spectral builds: the intensity has it),
+            # as Mitsuba's texture_d65 passes a texture through (projector likewise)
+            row[19] = textures.ref(tex, f"{what}: 'texture'", "colour").index + 1
             row[20] = np.tan(cutoff)
     elif em.type == "projector":
         _projector_row(row, em, what, model, textures)
