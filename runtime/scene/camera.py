@@ -47,7 +47,7 @@ def texture_resolution(tex: Any, loc: Loc) -> tuple[int, int]:
     texture or a constant."""
     if getattr(tex, "category", None) != "texture" or tex.type != "bitmap" or tex.decl:
         return 1, 1
-    from ..render.textures import load_bitmap  # memoized: the texture table reuses it
+    from ..render.textures import load_bitmap  # memoized: a recorded load decodes it once
 
     try:
         h, w = load_bitmap(tex.params["filename"], bool(tex.params["raw"])).shape[:2]
