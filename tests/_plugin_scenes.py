@@ -32,6 +32,19 @@ ROOM = """
   <emitter type="constant"><rgb name="radiance" value="0.3, 0.3, 0.3"/></emitter>"""
 
 
+def write_slide(path: Path, height: int = 16, width: int = 16, background: int = 0) -> Path:
+    """An 8-bit PNG to project, asymmetric so that a flip shows: the left half red, the top
+    half green, a blue rectangle in the middle, over ``background``."""
+    import numpy as np
+    from PIL import Image
+
+    x = np.full((height, width, 3), background, np.uint8)
+    x[:, :width // 2, 0], x[:height // 2, :, 1] = 255, 200
+    x[height // 4:3 * height // 4, width // 4:3 * width // 4, 2] = 255
+    Image.fromarray(x).save(path)
+    return path
+
+
 def write_scene(tmp_path: Path, body: str, sensor: str | None = None, max_depth: int = 4,
                 integrator: str | None = None, name: str = "scene.xml",
                 room: bool = True) -> Path:
@@ -46,16 +59,20 @@ def write_scene(tmp_path: Path, body: str, sensor: str | None = None, max_depth:
     return path
 
 
-def median_rmse(path: Path, spp: int, seeds: int = 3, ref_spp: int = 4096
-                ) -> tuple[float, float]:
-    """Median RMSEs of rdsl (rgb) and Mitsuba (scalar_rgb) at ``spp`` over ``seeds`` seeds,
-    against a ``ref_spp`` Mitsuba render (a rare firefly moves a mean, not a median)."""
+def median_rmse(path: Path, spp: int, seeds: int = 3, ref_spp: int = 4096,
+                variant: str = "rgb") -> tuple[float, float]:
+    """Median RMSEs of rdsl (``variant``) and Mitsuba (its scalar one) at ``spp`` over
+    ``seeds`` seeds, against a ``ref_spp`` Mitsuba render (a rare firefly moves a mean, not
+    a median)."""
     import numpy as np
     import rdsl
-    from _mitsuba_compare import mitsuba_render
+    from _mitsuba_compare import mitsuba_render as render
+
+    def mitsuba_render(path: Path, spp: int, seed: int) -> np.ndarray:
+        return render(path, spp, seed, f"scalar_{variant}")
 
     ref = mitsuba_render(path, ref_spp, seed=100)
-    scene = rdsl.load_scene(path)
+    scene = rdsl.load_scene(path, variant=variant)
 
     def err(img: np.ndarray) -> float:
         return float(np.sqrt(np.mean((np.asarray(img, np.float64)[..., :3] - ref) ** 2)))

@@ -9,13 +9,15 @@ import rdsl
 from rdsl.runtime.render.film import film_reach, new_accumulator
 from rdsl.runtime.render.kernel_source import literal
 
-FILTERS = [(0, 0.5), (1, 1.0), (1, 1.6), (2, 0.5)]  # (kind, param): box, tent, gaussian
+# (kind, param, param2): box, tent, gaussian, mitchell (B, C), lanczos (lobes)
+FILTERS = [(0, 0.5, 0.0), (1, 1.0, 0.0), (1, 1.6, 0.0), (2, 0.5, 0.0), (3, 1 / 3, 1 / 3),
+           (4, 3.0, 0.0)]
 
 
-def film_for(kind: int, param: float, spp: int) -> dict:
+def film_for(kind: int, param: float, spp: int, param2: float = 0.0) -> dict:
     return {"crop_x": 2, "crop_y": 1, "crop_w": 12, "crop_h": 9, "grid_x": 0, "grid_y": 0,
             "grid_w": 16, "grid_h": 12, "spp": spp, "channels": 3, "filter": kind,
-            "filter_param": param}
+            "filter_param": param, "filter_param2": param2}
 
 
 def source(film: dict) -> str:
@@ -41,10 +43,10 @@ fn separable(pixel: Int, spp: Int, S: [Float], ns: Int, acc: [Float]) {{
 """
 
 
-@pytest.mark.parametrize("kind,param", FILTERS)
-def test_separable_equals_direct(kind, param):
+@pytest.mark.parametrize("kind,param,param2", FILTERS)
+def test_separable_equals_direct(kind, param, param2):
     spp = 3
-    film = film_for(kind, param, spp)
+    film = film_for(kind, param, spp, param2)
     mod = rdsl.jit(source(film), target="host")
     cells = film["grid_w"] * film["grid_h"]
     rng = np.random.default_rng(kind * 10 + int(param * 10))

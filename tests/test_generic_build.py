@@ -118,7 +118,8 @@ def test_report_compares_instruction_counts(tmp_path, capsys):
     assert spec < generic, text
     # 3 diffuse colours, the light's radiance and the path integrator's 3 params
     assert "parameters: 15 values of 5 instance(s) folded as constants" in text
-    assert "sampling code for point, spot, directional, constant, envmap folded away" in text
+    assert ("sampling code for point, spot, directional, constant, envmap, projector "
+            "folded away") in text
     print(m[0])
 
 

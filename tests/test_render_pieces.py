@@ -47,7 +47,9 @@ import render.film;
 fn accumulate(pixel: Int, film: Film, pos: [Float], values: [Float], acc: [Float]) -> Int {
     return film_accumulate(pixel, film, pos, values, acc);
 }
-fn eval(kind: Int, x: Float, param: Float) -> Float { return filter_eval(kind, x, param); }
+fn eval(kind: Int, x: Float, param: Float, param2: Float) -> Float {
+    return filter_eval(kind, x, param, param2);
+}
 """
 
 
@@ -249,18 +251,34 @@ def test_cbox_camera_axis_fov_and_orientation(cam_mod):
 
 # -- filters ---------------------------------------------------------------------------------
 
-def np_filter(kind: str, x: np.ndarray, param: float) -> np.ndarray:
-    """Mitsuba 3's rfilters, in float64."""
+def np_filter(kind: str, x: np.ndarray, param: float, param2: float = 0.0) -> np.ndarray:
+    """Mitsuba 3's rfilters, in float64 (mitchell: B = param, C = param2; lanczos: param
+    lobes)."""
     if kind == "box":
         return np.where((x >= -0.5) & (x < 0.5), 1.0, 0.0)
     if kind == "tent":
         return np.maximum(0.0, 1.0 - np.abs(x / param))
+    if kind in ("mitchell", "catmullrom"):
+        b, c = (param, param2) if kind == "mitchell" else (0.0, 0.5)
+        a = np.abs(x)
+        inner = (12 - 9 * b - 6 * c) * a**3 + (-18 + 12 * b + 6 * c) * a**2 + (6 - 2 * b)
+        outer = ((-b - 6 * c) * a**3 + (6 * b + 30 * c) * a**2 + (-12 * b - 48 * c) * a
+                 + (8 * b + 24 * c))
+        return np.where(a < 2, np.where(a < 1, inner, outer) / 6, 0.0)
+    if kind == "lanczos":
+        a = np.abs(np.asarray(x, np.float64))
+        with np.errstate(invalid="ignore", divide="ignore"):
+            r = np.sinc(a) * np.sinc(a / param)
+        return np.where(a > param, 0.0, r)
     alpha = -1.0 / (2 * param * param)
     return np.maximum(0.0, np.exp(alpha * x * x) - math.exp(alpha * (4 * param) ** 2))
 
 
 FILTER_CASES = [("box", 0.5), ("tent", 1.0), ("tent", 1.7), ("gaussian", 0.5),
                 ("gaussian", 0.8)]
+# the filters with negative lobes: (kind, param, param2) as film.rdsl takes them
+SIGNED_CASES = [("mitchell", 1 / 3, 1 / 3), ("mitchell", 0.2, 0.6), ("catmullrom", 0.0, 0.5),
+                ("lanczos", 3, 0.0), ("lanczos", 2, 0.0)]
 
 
 @pytest.mark.parametrize("kind,param", FILTER_CASES)
@@ -268,7 +286,7 @@ def test_filter_values_and_integral(film_mod, kind, param):
     radius = 0.5 if kind == "box" else (param if kind == "tent" else 4 * param)
     n = 200001
     x = np.linspace(-radius - 0.5, radius + 0.5, n)
-    f = film_mod["eval"](FILTERS[kind], x.astype(np.float32), param).astype(np.float64)
+    f = film_mod["eval"](FILTERS[kind], x.astype(np.float32), param, 0.0).astype(np.float64)
     np.testing.assert_allclose(f, np_filter(kind, x.astype(np.float32), param), atol=2e-7)
     assert f.min() >= 0 and np.all(f[np.abs(x) > radius] == 0)
     integral = np.sum(f) * (x[1] - x[0])
@@ -282,6 +300,25 @@ def test_filter_values_and_integral(film_mod, kind, param):
     assert abs(integral - exact) < 1e-4 * exact
     # normalized, the filter is a unit-mass kernel (what the film's weight division relies on)
     assert abs(integral / exact - 1.0) < 1e-4
+
+
+@pytest.mark.parametrize("kind,param,param2", SIGNED_CASES)
+def test_signed_filter_values(film_mod, kind, param, param2):
+    """Mitchell-Netravali (catmullrom: B = 0, C = 1/2) and Lanczos: their values, negative
+    lobes and support; a Mitchell filter sums to 1 over integer shifts, whatever B and C."""
+    radius = param if kind == "lanczos" else 2.0
+    x = np.linspace(-radius - 0.5, radius + 0.5, 100001)
+    f = film_mod["eval"](FILTERS[kind], x.astype(np.float32), param,
+                         param2).astype(np.float64)
+    np.testing.assert_allclose(f, np_filter(kind, x.astype(np.float32), param, param2),
+                               atol=2e-6)
+    assert f.min() < 0 and np.all(f[np.abs(x) > radius] == 0)
+    assert film_mod["eval"](FILTERS[kind], np.float32([0.0]), param, param2)[0] == \
+        pytest.approx(1.0 if kind != "mitchell" else 1 - param / 3, abs=1e-6)
+    if kind != "lanczos":
+        t = np.float32(0.3) + np.arange(-2, 3, dtype=np.float32)
+        assert film_mod["eval"](FILTERS[kind], t, param, param2).sum() == \
+            pytest.approx(1.0, abs=1e-6)
 
 
 # -- the film --------------------------------------------------------------------------------
@@ -333,10 +370,15 @@ def splat_reference(film: dict, rfilter: _RFilter, pos: np.ndarray, vals: np.nda
         lo = np.maximum(np.ceil(pf - r).astype(int), 0)
         hi = np.minimum(np.floor(pf + r).astype(int), [cw - 1, ch - 1])
         param = rfilter.params.get("stddev", rfilter.params.get("radius"))
+        param2 = 0.0
+        if rfilter.type == "mitchell":
+            param, param2 = rfilter.params.get("B", 1 / 3), rfilter.params.get("C", 1 / 3)
+        elif rfilter.type == "lanczos":
+            param = rfilter.params.get("lobes", 3)
         for qy in range(lo[1], hi[1] + 1):
-            wy = np_filter(rfilter.type, np.float64(qy - pf[1]), param)
+            wy = np_filter(rfilter.type, np.float64(qy - pf[1]), param, param2)
             for qx in range(lo[0], hi[0] + 1):
-                wx = np_filter(rfilter.type, np.float64(qx - pf[0]), param)
+                wx = np_filter(rfilter.type, np.float64(qx - pf[0]), param, param2)
                 acc[qy, qx] += wx * wy * vw
     return acc
 
@@ -351,7 +393,9 @@ def run_film(film_mod, film, pos, vals, acc=None):
 
 FILM_CASES = [(_RFilter("box"), False), (_RFilter("tent", radius=1.0), False),
               (_RFilter("tent", radius=1.6), True), (_RFilter("gaussian", stddev=0.5), False),
-              (_RFilter("gaussian", stddev=0.5), True)]
+              (_RFilter("gaussian", stddev=0.5), True), (_RFilter("mitchell"), False),
+              (_RFilter("mitchell", B=0.2, C=0.6), True), (_RFilter("catmullrom"), False),
+              (_RFilter("lanczos"), True), (_RFilter("lanczos", lobes=2), False)]
 
 
 @pytest.mark.parametrize("rfilter,border", FILM_CASES,

@@ -156,8 +156,9 @@ BAD_SCENES = {
                   '        <integer name="crop_width" value="8"/>', '    </film>', '</sensor>'],
                  6, "hdrfilm: invalid crop window: crop_offset_x=60 and crop_width=8 do not fit"),
     "unknown_rfilter": (['<sensor type="perspective">', '    <film type="hdrfilm">',
-                         '        <rfilter type="lanczos"/>', '    </film>', '</sensor>'], 4,
-                        "unknown rfilter plugin 'lanczos'; accepted: box, tent, gaussian"),
+                         '        <rfilter type="sinc"/>', '    </film>', '</sensor>'], 4,
+                        "unknown rfilter plugin 'sinc'; accepted: box, tent, gaussian, "
+                        "mitchell, catmullrom, lanczos"),
     "unknown_sampler": (['<sensor type="perspective">', '    <sampler type="sobol"/>',
                          '</sensor>'], 3, ("unknown sampler plugin 'sobol'; accepted: "
                                           "independent, stratified, multijitter, orthogonal")),

@@ -20,7 +20,8 @@ from .colors import emission_row, emission_texels
 
 # the emitter table's kinds (lights.rdsl); an area light (stdlib `area` or a user's emitter
 # plugin, runtime/plugins.py) is also a scene instance, whose `eval` the integrator calls
-KINDS = {"area": 0, "point": 1, "spot": 2, "directional": 3, "constant": 4, "envmap": 5}
+KINDS = {"area": 0, "point": 1, "spot": 2, "directional": 3, "constant": 4, "envmap": 5,
+         "projector": 6}
 ENVIRONMENTS = ("constant", "envmap")
 STRIDE = 24  # floats per emitter in E (lights.rdsl: emitter_stride())
 LUMINANCE = np.array([0.212671, 0.715160, 0.072169])  # linear sRGB -> Y, as Mitsuba
@@ -155,8 +156,12 @@ def _emitter_row(em: Any, what: str, model: ColorModel = RGB, textures: Any = No
             if cutoff >= np.pi / 2:
                 raise CompileError(f"{what}: a projected 'texture' needs a 'cutoff_angle' below "
                                    "90 degrees", em.loc)
-            row[19] = textures.ref(tex, f"{what}: 'texture'", "emitted").index + 1
+            # a reflectance-like lookup (no D65 in spectral builds: the intensity has it),
+            # as Mitsuba's texture_d65 passes a texture through (projector likewise)
+            row[19] = textures.ref(tex, f"{what}: 'texture'", "colour").index + 1
             row[20] = np.tan(cutoff)
+    elif em.type == "projector":
+        _projector_row(row, em, what, model, textures)
     elif em.type == "directional":
         _put_color(row, p["irradiance"], f"{what}: 'irradiance'", em.loc, model)
         row[3:6] = p["direction"]
@@ -174,6 +179,28 @@ def _emitter_row(em: Any, what: str, model: ColorModel = RGB, textures: Any = No
         row[12:21] = np.linalg.inv(lin).reshape(-1)
         return row, table
     return row, None
+
+
+def _projector_row(row: np.ndarray, em: Any, what: str, model: ColorModel,
+                   textures: Any) -> None:
+    """A projector's E row (lights.rdsl; the image mapping of stdlib/emitter/projector.rdsl:
+    Mitsuba's perspective_projection of the texture's resolution)."""
+    p = em.params
+    lin = _linear_part(p["to_world"], what, em.loc, rigid=False)
+    tex = p["irradiance"]
+    if getattr(tex, "category", None) == "texture":
+        row[0:3], row[23] = 1.0, 1.0
+        # Mitsuba's texture_d65 passes a texture through: a bitmap or checkerboard is
+        # upsampled as a reflectance is (without D65), unlike a constant irradiance
+        row[20] = textures.ref(tex, f"{what}: 'irradiance'", "colour").index + 1
+    else:
+        _put_color(row, tex, f"{what}: 'irradiance'", em.loc, model)
+    row[3:6] = p["to_world"][:3, 3]
+    row[6:15] = np.linalg.inv(lin).reshape(-1)
+    row[15:18] = lin[:, 2]
+    sx = 0.5 / np.tan(np.radians(p["fov_x"]) / 2)
+    row[18:20] = sx, sx * p["aspect"]
+    row[21] = np.pi * float(p["scale"])
 
 
 def read_bitmap(path: str | Path, what: str = "bitmap", loc: Any = None) -> np.ndarray:

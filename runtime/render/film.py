@@ -14,23 +14,35 @@ import numpy as np
 __all__ = ["FILTERS", "border_size", "develop", "film_uniforms", "filter_radius",
            "new_accumulator"]
 
-# rfilter type -> the kind id of film.rdsl (filter_box / filter_tent / filter_gaussian)
-FILTERS = {"box": 0, "tent": 1, "gaussian": 2}
+# rfilter type -> the kind id of film.rdsl (filter_box ... filter_lanczos); Mitsuba's
+# catmullrom is its mitchell with B = 0, C = 1/2
+FILTERS = {"box": 0, "tent": 1, "gaussian": 2, "mitchell": 3, "catmullrom": 3, "lanczos": 4}
 
 
-def _filter_param(rfilter: Any) -> float:
+def _filter_params(rfilter: Any) -> tuple[float, float]:
+    """film.rdsl's (param, param2) of a filter: see filter_eval there."""
+    p = rfilter.params
     if rfilter.type == "gaussian":
-        return float(rfilter.params.get("stddev", 0.5))
+        return float(p.get("stddev", 0.5)), 0.0
     if rfilter.type == "tent":
-        return float(rfilter.params.get("radius", 1.0))
-    return 0.5
+        return float(p.get("radius", 1.0)), 0.0
+    if rfilter.type == "mitchell":
+        return float(p.get("B", 1.0 / 3.0)), float(p.get("C", 1.0 / 3.0))
+    if rfilter.type == "catmullrom":
+        return 0.0, 0.5
+    if rfilter.type == "lanczos":
+        return float(p.get("lobes", 3)), 0.0
+    return 0.5, 0.0
+
+
+def _radius(kind: int, param: float) -> float:
+    """film.rdsl's filter_radius."""
+    return {0: 0.5, 1: param, 3: 2.0, 4: param}.get(kind, 4.0 * param)
 
 
 def filter_radius(rfilter: Any) -> float:
     """The filter's support radius in pixels (Mitsuba's ``ReconstructionFilter::radius``)."""
-    if rfilter.type == "gaussian":
-        return 4.0 * _filter_param(rfilter)
-    return _filter_param(rfilter)
+    return _radius(FILTERS[rfilter.type], _filter_params(rfilter)[0])
 
 
 def border_size(rfilter: Any) -> int:
@@ -54,7 +66,8 @@ def film_uniforms(film: Any, spp: int, channels: int = 3) -> dict[str, Any]:
     return {"crop_x": cx, "crop_y": cy, "crop_w": cw, "crop_h": ch,
             "grid_x": cx - b, "grid_y": cy - b, "grid_w": cw + 2 * b, "grid_h": ch + 2 * b,
             "spp": int(spp), "channels": int(channels),
-            "filter": FILTERS[rf.type], "filter_param": _filter_param(rf)}
+            "filter": FILTERS[rf.type], "filter_param": _filter_params(rf)[0],
+            "filter_param2": _filter_params(rf)[1]}
 
 
 def new_accumulator(film: dict[str, Any]) -> np.ndarray:
@@ -74,7 +87,7 @@ def develop(acc: np.ndarray, film: dict[str, Any]) -> np.ndarray:
 
 def film_reach(film: dict[str, Any]) -> int:
     """Columns (rows) a sample reaches on each side of its cell (as `film_reach` in rdsl)."""
-    radius = {0: 0.5, 1: film["filter_param"]}.get(film["filter"], 4.0 * film["filter_param"])
+    radius = _radius(film["filter"], film["filter_param"])
     return int(np.ceil(np.float32(radius) + np.float32(0.5))) - 1
 
 

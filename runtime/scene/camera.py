@@ -40,3 +40,33 @@ def fov_x(p: dict[str, Any], aspect: float, loc: Callable[[str], Loc]) -> float:
         raise scene_error(f"the horizontal field of view ({out:g} degrees) must be in "
                           "(0, 180)", loc("fov"))
     return out
+
+
+def texture_resolution(tex: Any, loc: Loc) -> tuple[int, int]:
+    """Mitsuba's ``Texture::resolution``: a bitmap's (width, height), (1, 1) for any other
+    texture or a constant."""
+    if getattr(tex, "category", None) != "texture" or tex.type != "bitmap" or tex.decl:
+        return 1, 1
+    from ..render.textures import load_bitmap  # memoized: a recorded load decodes it once
+
+    try:
+        h, w = load_bitmap(tex.params["filename"], bool(tex.params["raw"])).shape[:2]
+    except (OSError, ValueError, SyntaxError) as e:
+        raise scene_error(f"bitmap: cannot load '{tex.params['filename']}': {e}",
+                          tex.loc) from None
+    except RuntimeError as e:  # Pillow missing
+        raise scene_error(f"bitmap: {e}", tex.loc) from None
+    return w, h
+
+
+def finish_projector(p: dict[str, Any], loc: Callable[[str], Loc]) -> None:
+    """Mitsuba's projector: its horizontal field of view (``fov_x``) and aspect ratio from
+    the irradiance texture's resolution, and a positive ``scale``."""
+    if not p["scale"] >= 0:
+        raise scene_error(f"projector: 'scale' must be >= 0, got {p['scale']:g}", loc("scale"))
+    if p["fov"] is None and p["fov_axis"] != "x":  # Mitsuba: an unreferenced property
+        raise scene_error("projector: 'fov_axis' applies to 'fov' only (give 'fov' too)",
+                          loc("fov_axis"))
+    w, h = texture_resolution(p["irradiance"], loc("irradiance"))
+    p["aspect"] = w / h
+    p["fov_x"] = fov_x(p, p["aspect"], loc)

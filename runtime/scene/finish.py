@@ -16,6 +16,7 @@ import numpy as np
 from ...compiler.ir import Loc
 from ...core.tensorfile import PBrdf, TensorFileError, read_pbrdf
 from . import transform as xf
+from .camera import finish_projector
 from .errors import scene_error
 from .hair import resolve_hair
 from .mesh_attributes import PREFIXES
@@ -129,6 +130,8 @@ class Finishers:
             p["to_world"] = xf.translate(p["position"])
         if obj.type == "point":
             p["position"] = p["to_world"][:3, 3].copy()
+        if obj.type == "projector":
+            finish_projector(p, lambda k: _loc(node, k))
         if obj.type == "spot" and p["beam_width"] is None:
             p["beam_width"] = p["cutoff_angle"] * 0.75
         if obj.type == "directional":
@@ -213,7 +216,11 @@ class Finishers:
 
     def finish_rfilter(self, obj: Plugin, node: ObjectNode, objects: dict) -> None:
         for k, v in obj.params.items():
-            if v <= 0:
+            if k in ("B", "C"):  # mitchell's: any finite value (Catmull-Rom is B = 0)
+                if not np.isfinite(v):
+                    raise scene_error(f"rfilter '{obj.type}': '{k}' must be finite",
+                                      _loc(node, k))
+            elif v <= 0:
                 raise scene_error(f"rfilter '{obj.type}': '{k}' must be positive", _loc(node, k))
 
     def finish_sampler(self, obj: Plugin, node: ObjectNode, objects: dict) -> None:

@@ -241,6 +241,12 @@ _SPECS = [
                                           "direction": P("vector"),
                                           "to_world": P("transform")}),
     PluginSpec("emitter", "constant", {"radiance": P("color", 1.0)}),
+    # fov from `fov`/`fov_axis` or `focal_length` and the irradiance texture's aspect ratio
+    # (a constant's is 1), as Mitsuba's parse_fov
+    PluginSpec("emitter", "projector", {"irradiance": P("color", 1.0), "scale": P("float", 1.0),
+                                        "to_world": P("transform"), "fov": P("float"),
+                                        "fov_axis": _CAMERA["fov_axis"],
+                                        "focal_length": P("string")}),
     PluginSpec("emitter", "envmap", {"filename": P("string", REQUIRED), "scale": P("float", 1.0),
                                      "to_world": P("transform"),
                                      "filter_type": P("string", "bilinear",
@@ -283,6 +289,9 @@ _SPECS = [
     PluginSpec("rfilter", "box", {"radius": P("float", 0.5)}),
     PluginSpec("rfilter", "tent", {"radius": P("float", 1.0)}),
     PluginSpec("rfilter", "gaussian", {"stddev": P("float", 0.5)}),
+    PluginSpec("rfilter", "mitchell", {"B": P("float", 1.0 / 3.0), "C": P("float", 1.0 / 3.0)}),
+    PluginSpec("rfilter", "catmullrom", {}),
+    PluginSpec("rfilter", "lanczos", {"lobes": P("integer", 3)}),
     PluginSpec("sampler", "independent", {"sample_count": P("integer", 4),
                                           "seed": P("integer", 0)}),
     PluginSpec("sampler", "stratified", {"sample_count": P("integer", 4),

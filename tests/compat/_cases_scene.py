@@ -227,6 +227,17 @@ SPOT_TEXTURE = (
     + bitmap("texture")
     + "</emitter>"
 )
+# a textured projector from above, a constant one (its fov from a focal length) from the left
+PROJECTOR = (
+    """
+  <emitter type="projector"><transform name="to_world"><lookat origin="0.5, 1.5, 6" target="0, 0, 0"/>
+    </transform><float name="scale" value="40"/><float name="fov" value="45"/>"""
+    + bitmap("irradiance")
+    + """</emitter>
+  <emitter type="projector"><transform name="to_world"><lookat origin="-3, -1, 5" target="-0.5, 0, 0"/>
+    </transform><rgb name="irradiance" value="0.6, 0.5, 0.3"/><float name="scale" value="12"/>
+    <string name="focal_length" value="35mm"/></emitter>"""
+)
 DIRECT = (
     '<integrator type="direct"><integer name="emitter_samples" value="2"/>'
     '<integer name="bsdf_samples" value="3"/></integrator>'
@@ -348,6 +359,10 @@ PERSPECTIVE = (
 )
 
 
+def filtered(sheet: str, rfilter: str) -> Sheet:
+    return Sheet(sheet, tuple(Case(f"{sheet}.{c.name}", c.xml) for c in LIT), rfilter=rfilter)
+
+
 def sensor(sheet: str, xml: str, **kw) -> Sheet:
     return Sheet(sheet, tuple(Case(f"{sheet}.{c.name}", c.xml) for c in LIT), sensor=xml, **kw)
 
@@ -383,6 +398,8 @@ SCENE_SHEETS: list[Sheet] = [
         },
     ),
     lit("spot_texture", SPOT_TEXTURE),
+    lit("projector", PROJECTOR),
+    lit("projector_spectral", PROJECTOR, variant="spectral"),
     Sheet("direct", tuple(Case(f"direct.{c.name}", c.xml) for c in LIT), integrator=DIRECT),
     Sheet("path_rr", tuple(Case(f"path_rr.{c.name}", c.xml) for c in LIT), integrator=PATH_RR),
     Sheet(
@@ -408,6 +425,10 @@ SCENE_SHEETS: list[Sheet] = [
     Sheet("eval_1", EVAL_1, cols=2),
     sensor("thinlens", THINLENS),
     sensor("orthographic", ORTHOGRAPHIC, rfilter='<rfilter type="gaussian"/>'),
+    filtered("mitchell", '<rfilter type="mitchell"><float name="B" value="0.2"/>'
+             '<float name="C" value="0.4"/></rfilter>'),
+    filtered("catmullrom", '<rfilter type="catmullrom"/>'),
+    filtered("lanczos", '<rfilter type="lanczos"/>'),
     sensor(
         "perspective",
         PERSPECTIVE,
