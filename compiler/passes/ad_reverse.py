@@ -422,7 +422,7 @@ class _Reverse:
             xs, ps = self.rules[y]
             for xi, p in zip(xs, ps):
                 if xi in self.varied:
-                    acc(adj, xi, b.op(Op.MUL, F32, a, self.P(p)), b)
+                    acc(adj, xi, _times(b, a, b.op(Op.MUL, F32, a, self.P(p))), b)
             return
         if y in self.detached:
             return
@@ -448,9 +448,9 @@ class _Reverse:
         elif op is Op.MUL:
             for i in (0, 1):
                 if x[i] in self.varied:
-                    acc(adj, x[i], b.op(Op.MUL, F32, a, v[1 - i]), b)
+                    acc(adj, x[i], _times(b, a, b.op(Op.MUL, F32, a, v[1 - i])), b)
         elif op is Op.DIV:  # d/da = 1/b, d/db = -y/b
-            q = b.op(Op.DIV, F32, a, v[1])
+            q = _times(b, a, b.op(Op.DIV, F32, a, v[1]))
             acc(adj, x[0], q, b)
             if x[1] in self.varied:
                 acc(adj, x[1], b.op(Op.NEG, F32, b.op(Op.MUL, F32, q, yv)), b)
@@ -472,6 +472,15 @@ class _Reverse:
 
 
 _F32_JSON = {"kind": "scalar", "dtype": "f32"}
+
+
+def _times(b: Builder, a: Value, p: Value) -> Value:
+    """``p`` (a product of the adjoint ``a`` and a local partial), 0 where ``a`` is 0: a
+    zero adjoint contributes nothing even where the partial is infinite or NaN (a ``sqrt``,
+    a division or a rule's partial on the side of a ``select``/``if`` not taken), as
+    inf * 0 = NaN would otherwise poison every adjoint upstream."""
+    zero = b.const(0.0, F32)
+    return b.op(Op.SELECT, F32, b.op(Op.EQ, BOOL, a, zero), zero, p)
 
 
 def _zero(t) -> object:
