@@ -453,7 +453,7 @@ class _Reverse:
             q = _times(b, a, b.op(Op.DIV, F32, a, v[1]))
             acc(adj, x[0], q, b)
             if x[1] in self.varied:
-                acc(adj, x[1], b.op(Op.NEG, F32, b.op(Op.MUL, F32, q, yv)), b)
+                acc(adj, x[1], _times(b, a, b.op(Op.NEG, F32, b.op(Op.MUL, F32, q, yv))), b)
         elif op is Op.SQRT:  # a / (2 y), 0 at y = 0
             q = b.op(Op.DIV, F32, a, b.op(Op.ADD, F32, yv, yv))
             acc(adj, x[0], b.op(Op.SELECT, F32, b.op(Op.GT, BOOL, yv, zero), q, zero), b)
