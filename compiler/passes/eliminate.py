@@ -149,6 +149,9 @@ class _Sweep:
             return [(a, self._coef(c))]
         if op is Op.DIV and x[0] in A and x[1] not in A:
             return [(x[0], ("inv", self._coef(x[1])))]
+        cond = self.defs.get(x[0]) if op is Op.SELECT else None
+        if isinstance(cond, Instr) and any(o in A for o in cond.operands):
+            return None  # ad_reverse's zero-adjoint guard (_times): its test reads an adjoint
         if op is Op.SELECT and x[0] not in A:
             out: list[tuple[Value, W]] = []
             for val, flip in ((x[1], False), (x[2], True)):
