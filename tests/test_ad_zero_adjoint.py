@@ -2,7 +2,9 @@
 the side of a ``select`` or an ``if`` not taken (``sqrt`` at 0, a division by 0, ``pow``
 at 0) has an infinite partial where its adjoint is 0.  Checked against analytic values,
 forward mode, and central differences of roughplastic.eval's d/d alpha (which was NaN in
-every lane without elimination)."""
+every lane without elimination), with and without graph elimination, which composes the
+guarded partials (a zero adjoint or a zero partial upstream stays 0) and must store no more
+than it does with the guards left out."""
 
 from __future__ import annotations
 
@@ -11,8 +13,10 @@ import pytest
 
 import rdsl
 from rdsl.compiler.build import Build
+from rdsl.compiler.passes import ad_reverse
 
-from test_ad_eliminate import BSDF, _surface
+from test_ad_eliminate import BSDF, _surface, _tape
+
 
 def _half_rsqrt(x, other):
     return np.where(x > 0, 0.5 / np.sqrt(np.maximum(x, 1e-30)), other)
@@ -32,13 +36,17 @@ fn if_sqrt(x: Float) -> Float {
     return r;
 }
 """
+# c * sqrt(x) at c = 0, x = 0: the adjoint of sqrt(x) is a * c = 0 (not a zero adjoint
+# tested by a guard of its own once elimination composes c with sqrt's infinite partial)
+SCALED = "fn scaled(x: Float, c: Float) -> Float { return c * pow(x, 0.5); }\n"
 SRC = "".join(f"fn {n}(x: Float) -> Float {{ return {e}; }}\n"
-              for n, (e, _) in KERNELS.items()) + IF_SRC
+              for n, (e, _) in KERNELS.items()) + IF_SRC + SCALED
 
 
-@pytest.fixture(scope="module")
-def builds():
-    return (rdsl.jit(SRC, build=Build.of("host", "rgb", ad="reverse")),
+@pytest.fixture(scope="module", params=[0, 10], ids=["plain", "eliminate"])
+def builds(request):
+    return (rdsl.jit(SRC, build=Build.of("host", "rgb", ad="reverse",
+                                         eliminate=request.param)),
             rdsl.jit(SRC, build=Build.of("host", "rgb", ad="forward")))
 
 
@@ -58,8 +66,32 @@ def test_zero_adjoint_through_infinite_partial(builds, name):
     np.testing.assert_allclose(d, want, rtol=1e-5)
 
 
-@pytest.mark.parametrize("mode", ["reverse", "forward"])
-def test_roughplastic_alpha_matches_central_differences_without_elimination(mode):
+def test_zero_partial_upstream_of_an_infinite_one(builds):
+    x = np.array([0.0, 0.0, 0.25, 4.0, 0.0], np.float32)
+    c = np.array([0.0, 0.0, 2.0, 0.0, 3.0], np.float32)
+    a = np.array([2.0, 0.0, 2.0, 2.0, 0.0], np.float32)
+    _, gx, gc = builds[0].scaled(x, c, a)
+    safe = np.maximum(x.astype(np.float64), 1e-30)
+    want_x = np.where(c != 0, c * 0.5 / np.sqrt(safe), 0.0)
+    np.testing.assert_allclose(gx, a * want_x, rtol=1e-5)
+    np.testing.assert_allclose(gc, a * np.sqrt(x), rtol=1e-5)
+
+
+@pytest.mark.parametrize("name", ["roughconductor", "roughplastic", "principled"])
+def test_guards_cost_elimination_nothing(name, monkeypatch):
+    """What the eliminated sweeps store, with the guards and with them left out (the
+    sweep as it was before them, which gives NaN for roughplastic's d/d alpha)."""
+    src, fn = BSDF / f"{name}.rdsl", f"{name}.eval"
+    guarded = [t.values for t in _tape(src, 10, fn)[1]]
+    monkeypatch.setattr(ad_reverse, "zero_guard", lambda b, a, p: p)
+    bare = [t.values for t in _tape(src, 10, fn)[1]]
+    off = [t.values for t in _tape(src, 0, fn)[1]]
+    assert len(guarded) == len(bare) and all(map(int.__le__, guarded, bare)), (guarded, bare)
+    assert sum(guarded) < sum(off)
+
+
+@pytest.mark.parametrize("mode, threshold", [("reverse", 0), ("reverse", 10), ("forward", 0)])
+def test_roughplastic_alpha_matches_central_differences(mode, threshold):
     rng = np.random.default_rng(3)
     n = 64
     si, wo = _surface(n, rng), _surface(n, rng)["wi"]
@@ -68,7 +100,8 @@ def test_roughplastic_alpha_matches_central_differences_without_elimination(mode
     fd = (np.asarray(plain(si, wo, alpha=0.25 + h), np.float64)
           - np.asarray(plain(si, wo, alpha=0.25 - h), np.float64)) / (2 * h)
     k = rdsl.jit(BSDF / "roughplastic.rdsl",
-                 build=Build.of("host", "rgb", ad=mode, eliminate=0))["roughplastic.eval"]
+                 build=Build.of("host", "rgb", ad=mode, eliminate=threshold)
+                 )["roughplastic.eval"]
     leaves = k.result["leaves"]
     if mode == "reverse":
         a = np.stack([rng.standard_normal(n).astype(np.float32) for _ in range(3)], 1)
