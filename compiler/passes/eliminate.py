@@ -11,10 +11,15 @@ The sweep is linear in the adjoints: each of its instructions that computes an a
 adjoints (``add``/``sub``/``neg`` of adjoints, ``mul`` of an adjoint by a primal value,
 ``div`` of an adjoint by one, ``select`` of adjoints and zeros on a primal condition) is a
 vertex of the linearized computational graph (LCG, transposed), its local partials the
-weights of its in-edges.  Everything else is a barrier: its adjoint operands are dependent
-vertices (kept), its adjoint results independent ones (loads of ``gPRM``, the results of
-the adjoint ``if``s and loops, the seeds).  Per straight-line region of the sweep (the
-block after its forward part, and each branch of its adjoint ``if``s), the pass
+weights of its in-edges.  ``ad_reverse`` guards each product of an adjoint and a partial
+(``zero_guard``: 0 where the adjoint is 0, even through an infinite partial); the pass
+reads a guard as an edge of weight 1 and keeps the guard's meaning on what it builds: every
+edge applied (a * w) and every product of weights (w_ij * w_jk) is 0 where its first factor
+is 0, so that the guards cost elimination nothing.  Everything else is a barrier: its
+adjoint operands are dependent vertices (kept), its adjoint results independent ones
+(loads of ``gPRM``, the results of the adjoint ``if``s and loops, the seeds).  Per
+straight-line region of the sweep (the block after its forward part, and each branch of its
+adjoint ``if``s), the pass
 
 1. builds the LCG, with weights as small expressions of primal values;
 2. eliminates intermediate vertices greedily, lowest Markowitz cost d_in*d_out first,
@@ -49,7 +54,7 @@ DEFAULT_THRESHOLD = 10
 # a weight: a float, a primal Value, or ("inv", w) 1/w, ("sel", cond, flip, w) w where cond
 # (flip: where not cond) and else 0, ("mul", w, w), ("add", w, w).  A select stays a select
 # (never a product with 0 or 1): an infinite partial the primal sweep selected away must
-# not become inf * 0 = NaN.
+# not become inf * 0 = NaN; so are products ("mul") and applications (_apply) zero-guarded.
 W = Union[float, Value, tuple]
 
 
