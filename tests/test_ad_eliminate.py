@@ -78,9 +78,10 @@ def test_bsdf_gradients_unchanged(name, params):
 
 
 def test_roughplastic_alpha_matches_central_differences():
-    """Found by the test above: the sweep without elimination gives NaN for d/d alpha of
-    roughplastic.eval (an inf * 0 in ad_reverse's sweep); with elimination it is finite and
-    agrees with central differences of the plain kernel."""
+    """Found by the test above: the sweep without elimination gave NaN for d/d alpha of
+    roughplastic.eval (an inf * 0 in ad_reverse's sweep, now guarded: tests/
+    test_ad_zero_adjoint.py); with elimination it is finite and agrees with central
+    differences of the plain kernel."""
     rng = np.random.default_rng(3)
     n = 64
     si, wo = _surface(n, rng), _surface(n, rng)["wi"]

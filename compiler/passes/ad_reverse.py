@@ -59,6 +59,7 @@ GRAD_BUFFER, ROW = "gPRM", "ad_row"
 TEXEL_BUFFER = "T"
 DIFFERENTIATED = {PARAM_BUFFER: (GRAD_BUFFER, ROW), TEXEL_BUFFER: ("gT", "ad_row_T")}
 SWEEP = "ad.sweep"  # on the first instruction of a sweep that follows its forward part
+GUARD = "ad.guard"  # on the select of a zero-adjoint guard (zero_guard), for ``eliminate``
 _NO_DERIVATIVE = {Op.FLOOR, Op.CEIL, Op.CAST, Op.BITCAST, Op.CONST, Op.LOAD, Op.REM}
 
 
@@ -422,7 +423,7 @@ class _Reverse:
             xs, ps = self.rules[y]
             for xi, p in zip(xs, ps):
                 if xi in self.varied:
-                    acc(adj, xi, b.op(Op.MUL, F32, a, self.P(p)), b)
+                    acc(adj, xi, zero_guard(b, a, b.op(Op.MUL, F32, a, self.P(p))), b)
             return
         if y in self.detached:
             return
@@ -448,12 +449,12 @@ class _Reverse:
         elif op is Op.MUL:
             for i in (0, 1):
                 if x[i] in self.varied:
-                    acc(adj, x[i], b.op(Op.MUL, F32, a, v[1 - i]), b)
+                    acc(adj, x[i], zero_guard(b, a, b.op(Op.MUL, F32, a, v[1 - i])), b)
         elif op is Op.DIV:  # d/da = 1/b, d/db = -y/b
-            q = b.op(Op.DIV, F32, a, v[1])
+            q = zero_guard(b, a, b.op(Op.DIV, F32, a, v[1]))
             acc(adj, x[0], q, b)
             if x[1] in self.varied:
-                acc(adj, x[1], b.op(Op.NEG, F32, b.op(Op.MUL, F32, q, yv)), b)
+                acc(adj, x[1], zero_guard(b, a, b.op(Op.NEG, F32, b.op(Op.MUL, F32, q, yv))), b)
         elif op is Op.SQRT:  # a / (2 y), 0 at y = 0
             q = b.op(Op.DIV, F32, a, b.op(Op.ADD, F32, yv, yv))
             acc(adj, x[0], b.op(Op.SELECT, F32, b.op(Op.GT, BOOL, yv, zero), q, zero), b)
@@ -472,6 +473,17 @@ class _Reverse:
 
 
 _F32_JSON = {"kind": "scalar", "dtype": "f32"}
+
+
+def zero_guard(b: Builder, a: Value, p: Value) -> Value:
+    """``p`` (a product of the adjoint ``a`` and a local partial), 0 where ``a`` is 0: a
+    zero adjoint contributes nothing even where the partial is infinite or NaN (a ``sqrt``,
+    a division or a rule's partial on the side of a ``select``/``if`` not taken), as
+    inf * 0 = NaN would otherwise poison every adjoint upstream.  The select is tagged
+    (``GUARD``): ``eliminate`` reads it as the edge ``p`` -> result of weight 1 and keeps
+    the guard on every edge it composes."""
+    zero = b.const(0.0, F32)
+    return b.op(Op.SELECT, F32, b.op(Op.EQ, BOOL, a, zero), zero, p, **{GUARD: True})
 
 
 def _zero(t) -> object:

@@ -11,10 +11,15 @@ The sweep is linear in the adjoints: each of its instructions that computes an a
 adjoints (``add``/``sub``/``neg`` of adjoints, ``mul`` of an adjoint by a primal value,
 ``div`` of an adjoint by one, ``select`` of adjoints and zeros on a primal condition) is a
 vertex of the linearized computational graph (LCG, transposed), its local partials the
-weights of its in-edges.  Everything else is a barrier: its adjoint operands are dependent
-vertices (kept), its adjoint results independent ones (loads of ``gPRM``, the results of
-the adjoint ``if``s and loops, the seeds).  Per straight-line region of the sweep (the
-block after its forward part, and each branch of its adjoint ``if``s), the pass
+weights of its in-edges.  ``ad_reverse`` guards each product of an adjoint and a partial
+(``zero_guard``: 0 where the adjoint is 0, even through an infinite partial); the pass
+reads a guard as an edge of weight 1 and keeps the guard's meaning on what it builds: every
+edge applied (a * w) and every product of weights (w_ij * w_jk) is 0 where its first factor
+is 0, so that the guards cost elimination nothing.  Everything else is a barrier: its
+adjoint operands are dependent vertices (kept), its adjoint results independent ones
+(loads of ``gPRM``, the results of the adjoint ``if``s and loops, the seeds).  Per
+straight-line region of the sweep (the block after its forward part, and each branch of its
+adjoint ``if``s), the pass
 
 1. builds the LCG, with weights as small expressions of primal values;
 2. eliminates intermediate vertices greedily, lowest Markowitz cost d_in*d_out first,
@@ -39,7 +44,7 @@ from typing import Union
 
 from ..ir import F32, PURE_OPS, Block, Builder, Function, Instr, Module, Op, Value, replace_uses
 from . import Pass, register
-from .ad_reverse import DIFFERENTIATED, SWEEP
+from .ad_reverse import DIFFERENTIATED, GUARD, SWEEP, zero_guard
 
 GRADIENTS = {grad for grad, _ in DIFFERENTIATED.values()}  # gPRM, gT
 from .ad_tape import sweep_blocks
@@ -49,7 +54,7 @@ DEFAULT_THRESHOLD = 10
 # a weight: a float, a primal Value, or ("inv", w) 1/w, ("sel", cond, flip, w) w where cond
 # (flip: where not cond) and else 0, ("mul", w, w), ("add", w, w).  A select stays a select
 # (never a product with 0 or 1): an infinite partial the primal sweep selected away must
-# not become inf * 0 = NaN.
+# not become inf * 0 = NaN; so are products ("mul") and applications (_apply) zero-guarded.
 W = Union[float, Value, tuple]
 
 
@@ -94,6 +99,7 @@ class _Sweep:
         self.movable: dict[Value, bool] = {}
         self.forward = {r for i in blk.instrs[:m] for r in i.results}
         self.varies: dict[W, bool] = {}
+        self.tests: set[Instr] = set()  # the ``a == 0`` tests of ad_reverse's guards
 
     def run(self) -> None:
         blk, m = self.blk, self.m
@@ -128,6 +134,9 @@ class _Sweep:
                     self.defs.update((a, None) for a in ins.regions[0].args)
                     self.defs.update((r, ins) for i in ins.regions[0].walk()
                                      for r in i.results)
+            elif ins.op is Op.SELECT and ins.attrs.get(GUARD):
+                self.tests.add(self.defs[ins.operands[0]])
+                self.adj.update(ins.results)
             elif ins.op is Op.LOAD and ins.operands[0].name in GRADIENTS:
                 self.adj.add(ins.result)
             elif any(v in self.adj for v in ins.operands) and ins.results \
@@ -149,6 +158,8 @@ class _Sweep:
             return [(a, self._coef(c))]
         if op is Op.DIV and x[0] in A and x[1] not in A:
             return [(x[0], ("inv", self._coef(x[1])))]
+        if op is Op.SELECT and ins.attrs.get(GUARD):
+            return [(x[2], 1.0)]  # every edge is guarded (_apply), so this is the identity
         if op is Op.SELECT and x[0] not in A:
             out: list[tuple[Value, W]] = []
             for val, flip in ((x[1], False), (x[2], True)):
@@ -185,13 +196,20 @@ class _Sweep:
             preds[v] = {}
             for src, w in edges:
                 _add_edge(preds, succs, src, v, w)
-            if all(u in lin for u in self.users.get(v, ())):
+            if all(u in lin or u in self.tests for u in self.users.get(v, ())):
                 inner.append(v)
-        best = (self._kept(preds), preds, set())
+        # a guarded product (ad_reverse's a * p, read only by its guard): merged into its
+        # guard first, so that the graph is the one the sweep has without guards
+        merged = {x for ins in lin if ins.attrs.get(GUARD) and (x := ins.operands[2]) in
+                  inner and len(self.users[x]) == 1}
+        for v in merged:
+            _drop(v, preds, succs)
+        inner = [v for v in inner if v not in merged]
+        best = (self._kept(preds), preds, merged)
         for guard in (True, False):
             p = {v: dict(e) for v, e in preds.items()}
             s = {v: dict(e) for v, e in succs.items()}
-            gone = self._eliminate(inner, p, s, guard)
+            gone = self._eliminate(inner, p, s, guard) | merged
             if self._kept(p) <= best[0]:
                 best = (self._kept(p), p, gone)
         return self._rebuild(instrs, lin, best[1], best[2])
@@ -221,14 +239,7 @@ class _Sweep:
             if c > self.threshold or (guard and not self._saves(v, preds, succs)):
                 continue  # pushed again if a neighbour's elimination changes its cost
             gone.add(v)
-            ins_, outs = preds.pop(v), succs.pop(v, {})
-            for i in ins_:
-                succs[i].pop(v, None)
-            for j in outs:
-                preds[j].pop(v, None)
-            for i, wi in ins_.items():
-                for j, wj in outs.items():
-                    _add_edge(preds, succs, i, j, _mul(wi, wj))
+            ins_, outs = _drop(v, preds, succs)
             for u in (*ins_, *outs):
                 if u in order and u not in gone:
                     heapq.heappush(heap, (cost(u), order[u], u))
@@ -268,6 +279,8 @@ class _Sweep:
         mp: dict[Value, Value] = {}
         local: dict[W, Value] = {}
         for ins in instrs:
+            if ins in self.tests:
+                continue  # its guard is rebuilt (_apply) or eliminated
             if ins not in lin:
                 ins.operands = [mp.get(v, v) for v in ins.operands]
                 for r in ins.regions:
@@ -287,16 +300,17 @@ class _Sweep:
 
     # -- weights --------------------------------------------------------------------------
     def _apply(self, a: Value, w: W, b: Builder, local: dict) -> Value:
-        """a * w."""
+        """a * w, 0 where a is 0 (w may be infinite there: ad_reverse's guard)."""
         if isinstance(w, float) and w == 1.0:
             return a
         if isinstance(w, float) and w == -1.0:
             return b.op(Op.NEG, F32, a)
+        zero = b.const(0.0, F32)
         if isinstance(w, tuple) and w[0] == "sel":
-            c, t, zero = self._weight(w[1], b, local), self._apply(a, w[3], b, local), \
-                b.const(0.0, F32)
+            c, t = self._weight(w[1], b, local), self._apply(a, w[3], b, local)
             return b.op(Op.SELECT, F32, c, *((zero, t) if w[2] else (t, zero)))
-        return b.op(Op.MUL, F32, a, self._weight(w, b, local))
+        p = b.op(Op.MUL, F32, a, self._weight(w, b, local))
+        return p if isinstance(w, float) else zero_guard(b, a, p)
 
     def _weight(self, w: W, b: Builder, local: dict) -> Value:
         """The value of ``w`` for the sweep: computed at the end of the forward part if it
@@ -343,9 +357,13 @@ class _Sweep:
             c = self._emit(w[1], b, memo, moved)
             x = self._emit(w[3], b, memo, moved)
             v = b.op(Op.SELECT, F32, c, *((zero, x) if w[2] else (x, zero)))
+        elif w[0] == "mul" and 0.0 in w[1:]:  # (a float) 0, even times an infinite partial
+            v = b.const(0.0, F32)
         else:
             x, y = (self._emit(u, b, memo, moved) for u in w[1:])
             v = b.op(Op.MUL if w[0] == "mul" else Op.ADD, F32, x, y)
+            if w[0] == "mul" and not any(isinstance(u, float) for u in w[1:]):
+                v = zero_guard(b, x, v)  # a zero partial upstream: 0 even through an infinite one
         memo[w] = v
         return v
 
@@ -362,6 +380,20 @@ def _mul(a: W, b: W) -> W:
     if isinstance(b, float) and b == 1.0:
         return a
     return ("mul", a, b)
+
+
+def _drop(v: Value, preds: dict, succs: dict) -> tuple[dict, dict]:
+    """Eliminate vertex ``v``: an edge i -> j of weight w_iv * w_vj for each of its
+    predecessors i and successors j; its in- and out-edges."""
+    ins_, outs = preds.pop(v), succs.pop(v, {})
+    for i in ins_:
+        succs[i].pop(v, None)
+    for j in outs:
+        preds[j].pop(v, None)
+    for i, wi in ins_.items():
+        for j, wj in outs.items():
+            _add_edge(preds, succs, i, j, _mul(wi, wj))
+    return ins_, outs
 
 
 def _add_edge(preds: dict, succs: dict, src: Value, dst: Value, w: W) -> None:
