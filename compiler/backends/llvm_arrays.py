@@ -51,6 +51,16 @@ class StridedArray:
         self.offsets: L.Value | None = None  # <W x i64>: lane * stride
 
 
+class ArrayGroup:
+    """The k outputs of one vector result (``ret.x``, ``ret.y``, ...) that may be the k
+    columns of one C-order ``(N, k)`` array: ``prepare_group`` checks, once per call, that
+    each starts one element after the one before and that every stride is k elements."""
+
+    def __init__(self, members: list[StridedArray]) -> None:
+        self.members = members
+        self.ok: L.Value | None = None  # i1: one interleaved array
+
+
 class ArrayAccess:
     """Emits the accesses of one entry point's arrays into the function ``fn`` through the
     builder ``b``, for W lanes; ``end`` bounds the elements that exist past a vector."""
@@ -74,6 +84,20 @@ class ArrayAccess:
                       for k in SHUFFLE_FACTORS}
         lanes = L.Constant(L.VectorType(I64, W), [L.Constant(I64, k) for k in range(W)])
         arr.offsets = b.mul(lanes, self.ml.splat(b, arr.stride, W))
+
+    def prepare_group(self, g: ArrayGroup) -> None:
+        """Check whether the members of ``g`` interleave into one array (see ArrayGroup)."""
+        b, first, k = self.b, g.members[0], len(g.members)
+        size = ALIGN[first.dtype]
+        base = b.ptrtoint(first.ptr, I64)
+        ok = None
+        for j, m in enumerate(g.members):
+            same = b.icmp_signed("==", m.stride, const(I64, k * size))
+            if j:
+                at = b.icmp_signed("==", b.ptrtoint(m.ptr, I64), b.add(base, const(I64, j * size)))
+                same = b.and_(same, at)
+            ok = same if ok is None else b.and_(ok, same)
+        g.ok = ok
 
     # -- helpers -------------------------------------------------------------------------
     def vec_ty(self, dtype: str) -> L.Type:
@@ -235,6 +259,45 @@ class ArrayAccess:
         wm = b.shuffle_vector(m, const(self.mask_ty, 0), spread)
         self.intrinsic(f"llvm.masked.store.{mangle(wide)}.p0", L.VoidType(),
                        [wv, self.element(arr, i), const(I32, 1), wm])
+
+    def store_group(self, g: ArrayGroup, i: L.Value, vs: list[L.Value], mask: L.Value | None,
+                    masked: L.Value | None = None) -> None:
+        """Store ``vs`` (one vector per member of ``g``, whose ``ok`` holds) at elements
+        i .. i + W - 1: interleaved in registers, then one store of the k * W elements'
+        span, masked by ``mask`` spread to every member (None: every lane; ``masked`` as
+        for :meth:`store`)."""
+        b, W, k = self.b, self.W, len(vs)
+        parts = list(vs)
+        while len(parts) & (len(parts) - 1):  # pad to a power of two, then concatenate
+            parts.append(L.Constant(vs[0].type, None))
+        while len(parts) > 1:
+            n = parts[0].type.count
+            both = L.Constant(L.VectorType(I32, 2 * n), [L.Constant(I32, x)
+                                                       for x in range(2 * n)])
+            parts = [b.shuffle_vector(parts[x], parts[x + 1], both)
+                     for x in range(0, len(parts), 2)]
+        # lane j * W + l of the concatenation is member j's lane l: put it at k * l + j
+        pick = L.Constant(L.VectorType(I32, k * W),
+                          [L.Constant(I32, (x % k) * W + x // k) for x in range(k * W)])
+        wv = b.shuffle_vector(parts[0], L.Constant(parts[0].type, None), pick)
+        p = self.element(g.members[0], i)
+
+        def plain() -> None:
+            b.store(wv, p, align=1)
+
+        def under_mask() -> None:
+            spread = L.Constant(L.VectorType(I32, k * W), [L.Constant(I32, x // k)
+                                                           for x in range(k * W)])
+            wm = b.shuffle_vector(mask, const(self.mask_ty, 0), spread)
+            self.intrinsic(f"llvm.masked.store.{mangle(wv.type)}.p0", L.VoidType(),
+                           [wv, p, const(I32, 1), wm])
+
+        if mask is None:
+            plain()
+        elif masked is None:
+            under_mask()
+        else:
+            self.branch(masked, under_mask, plain)
 
     def scatter(self, arr: StridedArray, i: L.Value, v: L.Value, m: L.Value) -> None:
         ptrs = self.lane_ptrs(arr, i)

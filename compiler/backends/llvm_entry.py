@@ -20,7 +20,7 @@ import llvmlite.ir as L
 from .. import ir
 from ..diagnostics import CompileError
 from .base import CArg, c_arg_names, c_args, c_name, split_params
-from .llvm_arrays import ArrayAccess, StridedArray
+from .llvm_arrays import SHUFFLE_FACTORS, ArrayAccess, ArrayGroup, StridedArray
 from .llvm_ops import I8, I32, I64, MEM, PTR, const, with_elem
 
 
@@ -92,6 +92,7 @@ class _RangeLoop:
         self.ins_args, self.outs = args[:n_in], args[n_in:]
         self.in_vals = values[:n_in]
         self.out_arrays = [self.arrays[k] for k in range(n_in, len(args))]
+        self.out_groups = _vector_groups(self.outs, self.out_arrays)
         self.b = L.IRBuilder(rng.append_basic_block("entry"))
         self.mem = ArrayAccess(ml, rng, self.b, self.end)
         self.mask_ty = self.mem.mask_ty
@@ -106,6 +107,9 @@ class _RangeLoop:
             self.uniforms.append(v)
         for arr in [*self.arrays.values(), self.user_mask]:
             self.mem.prepare(arr)
+        if W > 1 and self.strided_how() == "strided":
+            for g in self.out_groups.values():
+                self.mem.prepare_group(g)
         count = b.sub(self.end, self.begin)
         count = b.select(b.icmp_signed("<", count, const(I64, 0)), const(I64, 0), count)
         self.full_end = b.add(self.begin, b.and_(count, const(I64, ~(W - 1))))
@@ -166,12 +170,31 @@ class _RangeLoop:
     def store_outs(self, i: L.Value, results: list, store_mask: L.Value | None,
                    how: str, masked: L.Value | None = None) -> None:
         b, W = self.b, self.W
-        for a, arr, v in zip(self.outs, self.out_arrays, results):
+        vals = []
+        for a, v in zip(self.outs, results):
             if a.dtype == "bool":
                 v = b.zext(v, with_elem(v.type, I8))
             if W > 1 and not isinstance(v.type, L.VectorType):
                 v = self.ml.splat(b, v, W)
-            self.mem.store(arr, i, v, store_mask, how, masked)
+            vals.append(v)
+        done: set[int] = set()
+        for k, arr in enumerate(self.out_arrays):
+            g = self.out_groups.get(k) if how == "strided" else None
+            if k in done:
+                continue
+            if g is None:
+                self.mem.store(arr, i, vals[k], store_mask, how, masked)
+                continue
+            ks = range(k, k + len(g.members))
+            done.update(ks)
+
+            def apart(ks: range = ks) -> None:
+                for j in ks:
+                    self.mem.store(self.out_arrays[j], i, vals[j], store_mask, how, masked)
+
+            # the columns of one C-order (N, k) array: interleaved, one store of them all
+            self.mem.branch(g.ok, lambda g=g, ks=ks: self.mem.store_group(
+                g, i, [vals[j] for j in ks], store_mask, masked), apart)
 
     def load_user_mask(self, i: L.Value, lanes: L.Value | None, how: str) -> L.Value:
         m = self.mem.load(self.user_mask, i, lanes, how)
@@ -229,3 +252,20 @@ class _RangeLoop:
         results = self.call_body(full_end, exec_mask, lanes, "any")
         self.store_outs(full_end, results, exec_mask, "any")
         b.branch(done)
+
+
+def _vector_groups(outs: list[CArg], arrays: list[StridedArray]) -> dict[int, ArrayGroup]:
+    """The outputs that are the 2, 3 or 4 components of one vector result (named
+    ``<path>.x``, ``<path>.y``, ...), by the position of their first."""
+    groups: dict[int, ArrayGroup] = {}
+    k = 0
+    while k < len(outs):
+        head = outs[k].name.rpartition(".")[0]
+        end = k
+        while end < len(outs) and outs[end].name == f"{head}.{'xyzw'[min(end - k, 3)]}" \
+                and outs[end].dtype == outs[k].dtype and end - k < 4:
+            end += 1
+        if end - k in SHUFFLE_FACTORS:
+            groups[k] = ArrayGroup(arrays[k:end])
+        k = max(end, k + 1)
+    return groups
