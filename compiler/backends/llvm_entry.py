@@ -92,7 +92,9 @@ class _RangeLoop:
         self.ins_args, self.outs = args[:n_in], args[n_in:]
         self.in_vals = values[:n_in]
         self.out_arrays = [self.arrays[k] for k in range(n_in, len(args))]
-        self.out_groups = _vector_groups(self.outs, self.out_arrays)
+        self.out_groups = _vector_groups(self.outs, list(self.out_arrays))
+        self.in_groups = _vector_groups(self.ins_args,
+                                        [self.arrays.get(k) for k in range(n_in)])
         self.b = L.IRBuilder(rng.append_basic_block("entry"))
         self.mem = ArrayAccess(ml, rng, self.b, self.end)
         self.mask_ty = self.mem.mask_ty
@@ -108,7 +110,7 @@ class _RangeLoop:
         for arr in [*self.arrays.values(), self.user_mask]:
             self.mem.prepare(arr)
         if W > 1 and self.strided_how() == "strided":
-            for g in self.out_groups.values():
+            for g in [*self.in_groups.values(), *self.out_groups.values()]:
                 self.mem.prepare_group(g)
         count = b.sub(self.end, self.begin)
         count = b.select(b.icmp_signed("<", count, const(I64, 0)), const(I64, 0), count)
@@ -155,15 +157,31 @@ class _RangeLoop:
     def load_in(self, a: CArg, arr: StridedArray, i: L.Value, lanes: L.Value | None,
                 how: str) -> L.Value:
         """Load W elements of a varying input starting at i (lanes: tail mask or None)."""
-        v = self.mem.load(arr, i, lanes, how)
+        return self.as_bool(a, self.mem.load(arr, i, lanes, how))
+
+    def as_bool(self, a: CArg, v: L.Value) -> L.Value:
         if a.dtype == "bool":
             v = self.b.icmp_unsigned("!=", v, const(v.type, 0))
         return v
 
     def call_body(self, i: L.Value, exec_mask: L.Value, lanes: L.Value | None,
                   how: str) -> list:
-        vals = [self.load_in(a, self.arrays[k], i, lanes, how) if a.kind == "varying" else u
-                for k, (a, u) in enumerate(zip(self.ins_args, self.uniforms))]
+        vals = list(self.uniforms)
+        groups = self.in_groups if how == "strided" else {}
+        k = 0
+        while k < len(self.ins_args):
+            a, g = self.ins_args[k], groups.get(k)
+            if g is not None:  # maybe the columns of one C-order (N, k) array: one load
+                ks = range(k, k + len(g.members))
+                vs = self.mem.branch(
+                    g.ok, lambda g=g: [self.as_bool(a, v) for v in self.mem.load_group(g, i)],
+                    lambda ks=ks: [self.load_in(a, self.arrays[j], i, None, how) for j in ks])
+                vals[k:k + len(ks)] = vs
+                k += len(ks)
+                continue
+            if a.kind == "varying":
+                vals[k] = self.load_in(a, self.arrays[k], i, lanes, how)
+            k += 1
         res = self.b.call(self.body, vals + [exec_mask])
         return [self.b.extract_value(res, k) for k in range(len(self.outs))]
 
@@ -254,18 +272,19 @@ class _RangeLoop:
         b.branch(done)
 
 
-def _vector_groups(outs: list[CArg], arrays: list[StridedArray]) -> dict[int, ArrayGroup]:
-    """The outputs that are the 2, 3 or 4 components of one vector result (named
-    ``<path>.x``, ``<path>.y``, ...), by the position of their first."""
+def _vector_groups(args: list[CArg], arrays: list[StridedArray | None]
+                   ) -> dict[int, ArrayGroup]:
+    """The arrays that are the 2, 3 or 4 components of one vector argument or result (named
+    ``<path>.x``, ``<path>.y``, ...), by the position of the first."""
     groups: dict[int, ArrayGroup] = {}
     k = 0
-    while k < len(outs):
-        head = outs[k].name.rpartition(".")[0]
-        end = k
-        while end < len(outs) and outs[end].name == f"{head}.{'xyzw'[min(end - k, 3)]}" \
-                and outs[end].dtype == outs[k].dtype and end - k < 4:
+    while k < len(args):
+        head, end = args[k].name.rpartition(".")[0], k
+        while end < len(args) and end - k < 4 and args[end].strided \
+                and args[end].name == f"{head}.{'xyzw'[end - k]}" \
+                and args[end].dtype == args[k].dtype:
             end += 1
         if end - k in SHUFFLE_FACTORS:
-            groups[k] = ArrayGroup(arrays[k:end])
+            groups[k] = ArrayGroup([a for a in arrays[k:end] if a is not None])
         k = max(end, k + 1)
     return groups
