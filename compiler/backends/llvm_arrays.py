@@ -254,12 +254,7 @@ class ArrayAccess:
                            [v, p, const(I32, size), mask])
 
         def contiguous() -> None:
-            if mask is None:
-                plain()
-            elif masked is None:
-                under_mask()
-            else:
-                self.branch(masked, under_mask, plain)
+            self.plain_or_masked(mask, masked, plain, under_mask)
 
         def strided() -> None:
             m = mask if mask is not None else const(self.mask_ty, 1)
@@ -320,6 +315,12 @@ class ArrayAccess:
             self.intrinsic(f"llvm.masked.store.{mangle(wv.type)}.p0", L.VoidType(),
                            [wv, p, const(I32, 1), wm])
 
+        self.plain_or_masked(mask, masked, plain, under_mask)
+
+    def plain_or_masked(self, mask: L.Value | None, masked: L.Value | None,
+                        plain: Callable[[], None], under_mask: Callable[[], None]) -> None:
+        """A store: ``plain()`` without a mask, ``under_mask()`` with one, or the choice
+        at run time where ``masked`` says whether the mask may have inactive lanes."""
         if mask is None:
             plain()
         elif masked is None:

@@ -23,7 +23,6 @@ from .base import CArg, c_arg_names, c_args, c_name, split_params
 from .llvm_arrays import SHUFFLE_FACTORS, ArrayAccess, ArrayGroup, StridedArray
 from .llvm_ops import I8, I32, I64, MEM, PTR, const, with_elem
 
-
 # A kernel of more arrays than this reads and writes strided ones by gathers and scatters
 # only (see _RangeLoop.strided_how): cut the CPU time of compiling the principled BSDF's
 # spectral_polarized test harness (64 outputs) from 8.9 s to 6.2 s.
@@ -174,8 +173,10 @@ class _RangeLoop:
             if g is not None:  # maybe the columns of one C-order (N, k) array: one load
                 ks = range(k, k + len(g.members))
                 vs = self.mem.branch(
-                    g.ok, lambda g=g: [self.as_bool(a, v) for v in self.mem.load_group(g, i)],
-                    lambda ks=ks: [self.load_in(a, self.arrays[j], i, None, how) for j in ks])
+                    g.ok, lambda g=g, a=a: [self.as_bool(a, v)
+                                            for v in self.mem.load_group(g, i)],
+                    lambda ks=ks, a=a: [self.load_in(a, self.arrays[j], i, None, how)
+                                        for j in ks])
                 vals[k:k + len(ks)] = vs
                 k += len(ks)
                 continue
