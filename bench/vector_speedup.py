@@ -1,9 +1,10 @@
 """Vector speedup: a shading-heavy kernel (GGX visible-normal sampling plus evaluation) over
 4M samples on every CPU target, single-threaded and on all cores.
 
-Each target is called two ways: the natural call (C-order ``(N, 3)`` and ``(N, 2)`` arrays,
-a fresh result every call) and the component-array call (every vector component its own
-contiguous array, the output reused with ``out=``).  Prints time, Msamples/s and speedup
+Each target is called three ways: the natural call (C-order ``(N, 3)`` and ``(N, 2)`` arrays,
+a fresh result every call), the component-array call (every vector component its own
+contiguous array, the output reused with ``out=``) and the natural call into a C-order
+``(N, 4)`` ``out=`` ("C out").  Prints time, Msamples/s and speedup
 over `scalar` for both, the natural call on all cores, then what a fresh output costs
 without the kernel's output pool, cold compile time and cached load time (in a fresh
 process).  Not a test: run it by hand.
@@ -99,10 +100,12 @@ def main() -> None:
                                                    atol=1e-6)))
     clk = clock(args.clock)
     calls = {}
+    c_out = np.empty((args.n, 4), np.float32)  # a C-order out= (every target writes it)
     for name, k in kernels.items():
         calls[name] = {
             "natural": lambda k=k: k(wi, u1, u2, alpha, threads=1),
             "component": lambda k=k, o=outs[name]: k(*comp, threads=1, out=o),
+            "C out": lambda k=k, o=c_out: k(wi, u1, u2, alpha, threads=1, out=o),
             "all cores": lambda k=k: k(wi, u1, u2, alpha, threads=cores)}
         for fn in calls[name].values():
             fn()  # warm up (page faults, thread pool, the output pool)
@@ -129,15 +132,16 @@ def report(args: Any, cores: int, kernels: dict[str, Any], med: dict[tuple, floa
           "one thread, called the same way\n")
     print(f"{'target':8} {'natural s':>10} {'Msamp/s':>8} {'speedup':>8} "
           f"{'component s':>12} {'Msamp/s':>8} {'speedup':>8} {'nat/comp':>9} "
-          f"{'all cores s':>12} {'speedup':>8}")
+          f"{'all cores s':>12} {'speedup':>8} {'C out/comp':>11}")
     nat0, comp0 = med["scalar", "natural"], med["scalar", "component"]
     for name in kernels:
         nat, comp, alln = (med[name, c] for c in ("natural", "component", "all cores"))
         print(f"{name:8} {nat:10.4f} {n / nat / 1e6:8.1f} {nat0 / nat:7.2f}x "
               f"{comp:12.4f} {n / comp / 1e6:8.1f} {comp0 / comp:7.2f}x {nat / comp:9.3f} "
-              f"{alln:12.4f} {nat0 / alln:7.2f}x")
+              f"{alln:12.4f} {nat0 / alln:7.2f}x {med[name, 'C out'] / comp:11.3f}")
     print("\nnatural: C-order (N, 3)/(N, 2) arrays, a fresh result each call; component: "
-          "one contiguous array per component, out= reused")
+          "one contiguous array per component, out= reused; C out: the natural call into a "
+          "reused C-order (N, 4) out=")
 
 
 def fresh_output_cost(kernels: dict[str, Any], data: tuple, repeat: int, clk: Any) -> None:

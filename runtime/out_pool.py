@@ -5,7 +5,8 @@ every page is faulted in and zeroed by the OS on first write.  Measured on
 ``bench/ggx_kernel.rdsl`` (4M samples, a 64 MB output, one AVX-512 thread, on a loaded
 2-core machine): the kernel's own work is about 44 ms of CPU time, a fresh output adds
 15 to 200 ms more (page faults, and transparent huge page compaction when memory is
-fragmented).  So each kernel keeps a few blocks: a block is handed out again only when the
+fragmented); in later runs of ``bench/vector_speedup.py`` (about 50 ms of work) +9 to +13 ms
+(544 page faults: huge pages).  So each kernel keeps a few blocks: a block is handed out again only when the
 pool holds the only reference to it (no result, view or buffer export of it is alive), so a
 caller can never see its arrays change under it.  The pattern ``out = k(x)`` in a loop then
 alternates between two blocks and faults in no fresh pages after the second call.

@@ -20,9 +20,8 @@ import llvmlite.ir as L
 from .. import ir
 from ..diagnostics import CompileError
 from .base import CArg, c_arg_names, c_args, c_name, split_params
-from .llvm_arrays import ArrayAccess, StridedArray
+from .llvm_arrays import SHUFFLE_FACTORS, ArrayAccess, ArrayGroup, StridedArray
 from .llvm_ops import I8, I32, I64, MEM, PTR, const, with_elem
-
 
 # A kernel of more arrays than this reads and writes strided ones by gathers and scatters
 # only (see _RangeLoop.strided_how): cut the CPU time of compiling the principled BSDF's
@@ -92,6 +91,9 @@ class _RangeLoop:
         self.ins_args, self.outs = args[:n_in], args[n_in:]
         self.in_vals = values[:n_in]
         self.out_arrays = [self.arrays[k] for k in range(n_in, len(args))]
+        self.out_groups = _vector_groups(self.outs, list(self.out_arrays))
+        self.in_groups = _vector_groups(self.ins_args,
+                                        [self.arrays.get(k) for k in range(n_in)])
         self.b = L.IRBuilder(rng.append_basic_block("entry"))
         self.mem = ArrayAccess(ml, rng, self.b, self.end)
         self.mask_ty = self.mem.mask_ty
@@ -106,6 +108,9 @@ class _RangeLoop:
             self.uniforms.append(v)
         for arr in [*self.arrays.values(), self.user_mask]:
             self.mem.prepare(arr)
+        if W > 1 and self.strided_how() == "strided":
+            for g in [*self.in_groups.values(), *self.out_groups.values()]:
+                self.mem.prepare_group(g)
         count = b.sub(self.end, self.begin)
         count = b.select(b.icmp_signed("<", count, const(I64, 0)), const(I64, 0), count)
         self.full_end = b.add(self.begin, b.and_(count, const(I64, ~(W - 1))))
@@ -151,27 +156,64 @@ class _RangeLoop:
     def load_in(self, a: CArg, arr: StridedArray, i: L.Value, lanes: L.Value | None,
                 how: str) -> L.Value:
         """Load W elements of a varying input starting at i (lanes: tail mask or None)."""
-        v = self.mem.load(arr, i, lanes, how)
+        return self.as_bool(a, self.mem.load(arr, i, lanes, how))
+
+    def as_bool(self, a: CArg, v: L.Value) -> L.Value:
         if a.dtype == "bool":
             v = self.b.icmp_unsigned("!=", v, const(v.type, 0))
         return v
 
     def call_body(self, i: L.Value, exec_mask: L.Value, lanes: L.Value | None,
                   how: str) -> list:
-        vals = [self.load_in(a, self.arrays[k], i, lanes, how) if a.kind == "varying" else u
-                for k, (a, u) in enumerate(zip(self.ins_args, self.uniforms))]
+        vals = list(self.uniforms)
+        groups = self.in_groups if how == "strided" else {}
+        k = 0
+        while k < len(self.ins_args):
+            a, g = self.ins_args[k], groups.get(k)
+            if g is not None:  # maybe the columns of one C-order (N, k) array: one load
+                ks = range(k, k + len(g.members))
+                vs = self.mem.branch(
+                    g.ok, lambda g=g, a=a: [self.as_bool(a, v)
+                                            for v in self.mem.load_group(g, i)],
+                    lambda ks=ks, a=a: [self.load_in(a, self.arrays[j], i, None, how)
+                                        for j in ks])
+                vals[k:k + len(ks)] = vs
+                k += len(ks)
+                continue
+            if a.kind == "varying":
+                vals[k] = self.load_in(a, self.arrays[k], i, lanes, how)
+            k += 1
         res = self.b.call(self.body, vals + [exec_mask])
         return [self.b.extract_value(res, k) for k in range(len(self.outs))]
 
     def store_outs(self, i: L.Value, results: list, store_mask: L.Value | None,
                    how: str, masked: L.Value | None = None) -> None:
         b, W = self.b, self.W
-        for a, arr, v in zip(self.outs, self.out_arrays, results):
+        vals = []
+        for a, v in zip(self.outs, results):
             if a.dtype == "bool":
                 v = b.zext(v, with_elem(v.type, I8))
             if W > 1 and not isinstance(v.type, L.VectorType):
                 v = self.ml.splat(b, v, W)
-            self.mem.store(arr, i, v, store_mask, how, masked)
+            vals.append(v)
+        done: set[int] = set()
+        for k, arr in enumerate(self.out_arrays):
+            g = self.out_groups.get(k) if how == "strided" else None
+            if k in done:
+                continue
+            if g is None:
+                self.mem.store(arr, i, vals[k], store_mask, how, masked)
+                continue
+            ks = range(k, k + len(g.members))
+            done.update(ks)
+
+            def apart(ks: range = ks) -> None:
+                for j in ks:
+                    self.mem.store(self.out_arrays[j], i, vals[j], store_mask, how, masked)
+
+            # the columns of one C-order (N, k) array: interleaved, one store of them all
+            self.mem.branch(g.ok, lambda g=g, ks=ks: self.mem.store_group(
+                g, i, [vals[j] for j in ks], store_mask, masked), apart)
 
     def load_user_mask(self, i: L.Value, lanes: L.Value | None, how: str) -> L.Value:
         m = self.mem.load(self.user_mask, i, lanes, how)
@@ -229,3 +271,21 @@ class _RangeLoop:
         results = self.call_body(full_end, exec_mask, lanes, "any")
         self.store_outs(full_end, results, exec_mask, "any")
         b.branch(done)
+
+
+def _vector_groups(args: list[CArg], arrays: list[StridedArray | None]
+                   ) -> dict[int, ArrayGroup]:
+    """The arrays that are the 2, 3 or 4 components of one vector argument or result (named
+    ``<path>.x``, ``<path>.y``, ...), by the position of the first."""
+    groups: dict[int, ArrayGroup] = {}
+    k = 0
+    while k < len(args):
+        head, end = args[k].name.rpartition(".")[0], k
+        while end < len(args) and end - k < 4 and args[end].strided \
+                and args[end].name == f"{head}.{'xyzw'[end - k]}" \
+                and args[end].dtype == args[k].dtype:
+            end += 1
+        if end - k in SHUFFLE_FACTORS:
+            groups[k] = ArrayGroup([a for a in arrays[k:end] if a is not None])
+        k = max(end, k + 1)
+    return groups
