@@ -226,8 +226,8 @@ def measure(sheets: list[Sheet] | Sheet | str, live: bool = True
     if sh is None:
         from _suite import BY_NAME
         sh = BY_NAME[sheets]
-    if sh.name in _MEASURED:
-        return _MEASURED[sh.name]
+    if (sh.name, live) in _MEASURED:
+        return _MEASURED[sh.name, live]
     if not _TMP:
         _TMP.append(Path(tempfile.mkdtemp(prefix="rdsl-compat-")))
     path = write(sh, _TMP[0] / sh.name)
@@ -244,8 +244,8 @@ def measure(sheets: list[Sheet] | Sheet | str, live: bool = True
                            "live")
         else:
             out[c.name] = (ours, noise_table()[sh.name]["rmse"][c.name], "noise.json")
-    _MEASURED[sh.name] = out
+    _MEASURED[sh.name, live] = out
     return out
 
 
-_MEASURED: dict[str, dict[str, tuple[float, float, str]]] = {}
+_MEASURED: dict[tuple[str, bool], dict[str, tuple[float, float, str]]] = {}
