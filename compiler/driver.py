@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import os
 import sys
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import TextIO
 
@@ -119,13 +119,32 @@ def verify_mode() -> str:
 
 def compile_kernels(source_or_path: str | Path, build: Build, filename: str | None = None,
                     scene: SceneSpec | None = None, report: list[str] | None = None,
-                    search_paths: list[Path] | None = None) -> tuple[Module, list[Path]]:
+                    search_paths: list[Path] | None = None,
+                    exports: Sequence[str] | None = None) -> tuple[Module, list[Path]]:
     """Compile to post-vectorize IR for ``build``.  Returns the module and the source
     files it was built from (for cache keys).  ``scene`` specializes the scene
     placeholders (see :mod:`rdsl.compiler.passes.specialize`); ``report`` collects what
-    specialization did; ``search_paths`` are the frontend's (see :func:`frontend`)."""
+    specialization did; ``search_paths`` are the frontend's (see :func:`frontend`).
+    ``exports``: build only these of the file's kernels (``"roughplastic.eval"``); the
+    others, and what only they call, are not compiled."""
     with gc_paused():
         module = frontend(source_or_path, filename, search_paths)
+        if exports is not None:
+            _keep_exports(module, exports)
         run_passes(module, pipeline(build, scene, report), verify=verify_mode())
     module.attrs["target"] = build.target.name
     return module, source_files(source_or_path, search_paths or (), filename=filename)
+
+
+def _keep_exports(module: Module, exports: Sequence[str]) -> None:
+    """Unexport every kernel not named in ``exports``; a name the file does not export is a
+    diagnostic listing those it does."""
+    exported = [n for n, f in module.functions.items() if f.attrs.get("export")]
+    unknown = sorted(set(exports) - set(exported))
+    if unknown:
+        raise CompileError(f"no exported function {', '.join(map(repr, unknown))}; the file "
+                           f"exports: {', '.join(sorted(exported))}", None)
+    for name in exported:
+        if name not in exports:
+            module.functions[name].attrs.pop("export")
+

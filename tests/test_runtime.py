@@ -13,6 +13,7 @@ import pytest
 import rdsl
 from _backend_util import add_kernel, build_and_load, new_module, vt
 from rdsl.compiler import ir
+from rdsl.compiler.diagnostics import CompileError
 from rdsl.compiler.targets import host_target
 
 Op = ir.Op
@@ -319,3 +320,18 @@ def test_jit_source_text(fake_driver):
     assert not rdsl.jit(text).from_cache
     assert rdsl.jit(text).from_cache
     assert not rdsl.jit(text + "\n").from_cache
+
+
+def test_jit_exports_builds_only_the_named_kernels(tmp_path, monkeypatch):
+    """``exports=`` compiles the named kernels alone, with the results of the whole file's
+    build; a name the file does not export is a diagnostic listing the ones it does."""
+    monkeypatch.setenv("RDSL_CACHE_DIR", str(tmp_path))
+    src = ("fn double(x: Float) -> Float { return 2.0 * x; }\n"
+           "fn square(x: Float) -> Float { return x * x; }\n")
+    whole = rdsl.jit(src)
+    only = rdsl.jit(src, exports=["square"])
+    assert sorted(only.kernels) == ["square"] and sorted(whole.kernels) == ["double", "square"]
+    x = np.linspace(-2, 2, 37, dtype=np.float32)
+    np.testing.assert_array_equal(only["square"](x), whole["square"](x))
+    with pytest.raises(CompileError, match="no exported function 'cube'.*double, square"):
+        rdsl.jit(src, exports=["cube"])
