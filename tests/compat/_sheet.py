@@ -38,6 +38,7 @@ class Case:
     xml: str
     shape: bool = False
     xfail: str = ""
+    strict: bool = True  # false: the test's spp cannot decide the case (the reason says why)
 
 
 @dataclass(frozen=True)
