@@ -38,6 +38,7 @@ from ..ir import (
     BOOL,
     F32,
     I32,
+    U32,
     Block,
     BufferType,
     Builder,
@@ -49,6 +50,7 @@ from ..ir import (
     Value,
     clone_block,
     replace_uses,
+    type_to_json,
 )
 from . import Pass, register
 from .ad_forward import PARAM_BUFFER
@@ -58,6 +60,9 @@ GRAD_BUFFER, ROW = "gPRM", "ad_row"
 # into gT at row ad_row_T (d loss / d texel, for bitmap textures' ``<id>.data``)
 TEXEL_BUFFER = "T"
 DIFFERENTIATED = {PARAM_BUFFER: (GRAD_BUFFER, ROW), TEXEL_BUFFER: ("gT", "ad_row_T")}
+# the per-lane checkpoint tape of loops' carried state (a build's ``tape`` > 0): the
+# primal loop stores the state before iteration n < tape at ad_tape[ad_row_tape + ...]
+TAPE, TAPE_ROW = "ad_tape", "ad_row_tape"
 SWEEP = "ad.sweep"  # on the first instruction of a sweep that follows its forward part
 _NO_DERIVATIVE = {Op.FLOOR, Op.CEIL, Op.CAST, Op.BITCAST, Op.CONST, Op.LOAD, Op.REM}
 
@@ -66,16 +71,23 @@ _NO_DERIVATIVE = {Op.FLOOR, Op.CEIL, Op.CAST, Op.BITCAST, Op.CONST, Op.LOAD, Op.
 class AdReverse(Pass):
     name = "ad_reverse"
 
+    def __init__(self, tape: int = 0) -> None:
+        self.tape = tape  # iterations checkpointed per loop (0: recompute from the start)
+
     def run(self, module: Module) -> None:
         for fn in module.functions.values():
-            _Reverse(fn).run()
+            _Reverse(fn, self.tape).run()
 
 
 class _Reverse:
     """The adjoint of one function."""
 
-    def __init__(self, fn: Function) -> None:
+    def __init__(self, fn: Function, cap: int = 0) -> None:
         self.fn = fn
+        self.cap = cap  # checkpointed iterations per taped loop
+        self.tape = (Value(BufferType(F32), TAPE), Value(I32, TAPE_ROW))
+        self.tape_size = 0  # floats per lane
+        self.tape_instrs: set[int] = set()  # the stores (and their indices) of the tape
         # a differentiated buffer (PRM, T) -> its gradient buffer and row
         self.bufs: dict[Value, tuple[Value, Value]] = {
             p.value: (Value(BufferType(F32), DIFFERENTIATED[p.value.name][0]),
@@ -97,6 +109,8 @@ class _Reverse:
         self._activity()
         self._count_loops(fn.body)
         self._export(fn.body)
+        if self.cap > 0:
+            self._tape_loops(fn.body)
         ret = fn.body.instrs.pop()
         assert ret.op is Op.RETURN
         adj: dict[Value, Value] = {}
@@ -125,12 +139,19 @@ class _Reverse:
                 extra += [dict(entry, name=grad.name, leaves=[grad.name]),
                           {"name": row.name, "type": {"kind": "scalar", "dtype": "i32"},
                            "uniform": False, "default": None, "leaves": [row.name]}]
+        if self.tape_size:
+            fn.params += [Param(self.tape[0], uniform=True), Param(self.tape[1])]
+            extra += [{"name": TAPE, "type": type_to_json(self.tape[0].type), "uniform": True,
+                       "default": None, "leaves": [TAPE], "tape_floats": self.tape_size},
+                      {"name": TAPE_ROW, "type": {"kind": "scalar", "dtype": "i32"},
+                       "uniform": False, "default": None, "leaves": [TAPE_ROW]}]
         fn.attrs["abi_params"] = [*fn.attrs.get("abi_params", []), *extra]
         if seeds:
             self._abi_results(seeds)
         for ins in fn.walk():
             ins.attrs.pop("ad.counted", None)
             ins.attrs.pop("ad.export", None)
+            ins.attrs.pop("ad.tape", None)
 
     def _abi_results(self, seeds: list[Param]) -> None:
         fn = self.fn
@@ -231,6 +252,37 @@ class _Reverse:
             out.append(ins)
         block.instrs = out
 
+    def _tape_loops(self, block: Block) -> None:
+        """Checkpoint the carried state of each counted loop that no loop encloses (an
+        inner loop's slots would be overwritten by each outer iteration): at the start of
+        iteration n its body stores the state in slot min(n, cap) of the loop's part of the
+        lane's tape row (slot ``cap`` takes the iterations beyond, never read)."""
+        for ins in block.instrs:
+            if ins.op is not Op.LOOP:
+                for r in ins.regions:
+                    self._tape_loops(r)
+                continue
+            body = ins.regions[0]
+            state, n = body.args[:-1], body.args[-1]
+            if not ins.attrs.get("ad.counted") or any(
+                    a.type not in (F32, I32, U32, BOOL) for a in state):
+                continue
+            ins.attrs["ad.tape"] = self.tape_size
+            tb = Builder(Block(), ins.loc)
+            cap = tb.const(self.cap, I32)
+            slot = tb.op(Op.SELECT, I32, tb.op(Op.LT, BOOL, n, cap), n, cap)
+            for j, idx in enumerate(self._slot(slot, len(state), self.tape_size, tb)):
+                tb.emit(Op.STORE, [self.tape[0], idx, _to_f32(state[j], tb)], [])
+            self.tape_instrs.update(id(i) for i in tb.block.instrs)
+            body.instrs[:0] = tb.block.instrs
+            self.tape_size += (self.cap + 1) * len(state)
+
+    def _slot(self, slot: Value, size: int, offset: int, b: Builder) -> list[Value]:
+        """The tape indices of the ``size`` values of slot ``slot`` of a loop's part."""
+        base = b.op(Op.ADD, I32, self.tape[1], b.op(Op.ADD, I32, b.op(
+            Op.MUL, I32, slot, b.const(size, I32)), b.const(offset, I32)))
+        return [base, *[b.op(Op.ADD, I32, base, b.const(j, I32)) for j in range(1, size)]]
+
     def _export(self, block: Block) -> None:
         """Make each ``if`` with an active result also yield every value its branches
         compute (innermost first, so a branch's exports include its inner ifs'): the
@@ -287,7 +339,7 @@ class _Reverse:
         m: dict[Value, Value] = dict(self.sub)
         m.update(zip(block.args, args))
         tmp = Block()
-        tmp.instrs = block.instrs[:-1]
+        tmp.instrs = [i for i in block.instrs[:-1] if id(i) not in self.tape_instrs]
         new = clone_block(tmp, m).instrs
         b.block.instrs += new
         for old, v in m.items():
@@ -393,8 +445,16 @@ class _Reverse:
 
     def _state_at(self, ins: Instr, k: Value, b: Builder) -> list[Value]:
         """The loop's carried values before iteration ``k`` (0 = the initial values): the
-        body run k times from them."""
-        body, init = ins.regions[0], [self.P(v) for v in ins.operands]
+        body run k times from them, or, for a taped loop, run k - c times from checkpoint
+        c = min(k, cap - 1) (0 times for k < cap)."""
+        body, init, count = ins.regions[0], [self.P(v) for v in ins.operands], k
+        if ins.attrs.get("ad.tape") is not None:
+            last = b.const(self.cap - 1, I32)
+            c = b.op(Op.SELECT, I32, b.op(Op.LT, BOOL, k, last), k, last)
+            idx = self._slot(c, len(body.args) - 1, ins.attrs["ad.tape"], b)
+            init = [_from_f32(b.op(Op.LOAD, F32, self.tape[0], i), a.type, b)
+                    for i, a in zip(idx, body.args)] + [c]
+            count = b.op(Op.SUB, I32, k, c)
         types = [a.type for a in body.args]
         then, other = Block(), Block()
         tb = Builder(then, ins.loc)
@@ -405,11 +465,11 @@ class _Reverse:
         _, m = self.clone_into(body, s, bb)
         y = [m.get(v, v) for v in body.instrs[-1].operands[1:]]
         i1 = bb.op(Op.ADD, I32, i, bb.const(1, I32))
-        bb.yield_(bb.op(Op.LT, BOOL, i1, k), i1, *y)
+        bb.yield_(bb.op(Op.LT, BOOL, i1, count), i1, *y)
         inner = tb.emit(Op.LOOP, [tb.const(0, I32), *init], [I32, *types], regions=[lb])
         tb.yield_(*inner.results[1:])
         Builder(other, ins.loc).yield_(*init)
-        cond = b.op(Op.GT, BOOL, k, b.const(0, I32))
+        cond = b.op(Op.GT, BOOL, count, b.const(0, I32))
         return b.emit(Op.IF, [cond], types, regions=[then, other]).results
 
     # long: one rule per op, as a table would hold them
@@ -476,6 +536,24 @@ _F32_JSON = {"kind": "scalar", "dtype": "f32"}
 
 def _zero(t) -> object:
     return 0.0 if t == F32 else False if t == BOOL else 0
+
+
+def _to_f32(v: Value, b: Builder) -> Value:
+    """A carried value as the Float the tape stores, bit for bit."""
+    if v.type == F32:
+        return v
+    if v.type == BOOL:
+        return b.op(Op.SELECT, F32, v, b.const(1.0, F32), b.const(0.0, F32))
+    return b.op(Op.BITCAST, F32, v)
+
+
+def _from_f32(x: Value, t, b: Builder) -> Value:
+    """The inverse of :func:`_to_f32` for type ``t``."""
+    if t == F32:
+        return x
+    if t == BOOL:
+        return b.op(Op.NE, BOOL, x, b.const(0.0, F32))
+    return b.op(Op.BITCAST, t, x)
 
 
 def _mark_sweep(block: Block, start: int) -> None:
