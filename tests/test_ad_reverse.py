@@ -134,6 +134,13 @@ def test_cbox_backward_tape_equals_recomputation_with_russian_roulette():
     scene.params["path.rr_depth"] = 2
     d = np.random.default_rng(3).standard_normal((8, 8, 3))
     got = {t: scene.backward(d, params=NAMES, spp=4, seed=9, tape=t) for t in (0, 2, 16)}
+    from rdsl.runtime.render.differentiable import ad_twin
+
+    for t in (2, 16):  # the bounce loop's state is on the tape: one slot past the cap
+        kernel = next(k for k in ad_twin(scene, "reverse", 0, t).compile().manifest[
+            "kernels"] if k["name"] == "render_sample")
+        floats = [p["tape_floats"] for p in kernel["params"] if p["name"] == "ad_tape"]
+        assert len(floats) == 1 and floats[0] % (t + 1) == 0 and floats[0] > t + 1
     assert any(np.any(g != 0) for g in got[0].values())
     for t in (2, 16):
         for name in NAMES:

@@ -39,6 +39,7 @@ from ..ir import (
     F32,
     I32,
     U32,
+    U64,
     Block,
     BufferType,
     Builder,
@@ -265,17 +266,18 @@ class _Reverse:
             body = ins.regions[0]
             state, n = body.args[:-1], body.args[-1]
             if not ins.attrs.get("ad.counted") or any(
-                    a.type not in (F32, I32, U32, BOOL) for a in state):
+                    a.type not in (F32, I32, U32, BOOL, U64) for a in state):
                 continue
-            ins.attrs["ad.tape"] = self.tape_size
             tb = Builder(Block(), ins.loc)
             cap = tb.const(self.cap, I32)
             slot = tb.op(Op.SELECT, I32, tb.op(Op.LT, BOOL, n, cap), n, cap)
-            for j, idx in enumerate(self._slot(slot, len(state), self.tape_size, tb)):
-                tb.emit(Op.STORE, [self.tape[0], idx, _to_f32(state[j], tb)], [])
+            floats = [x for a in state for x in _pack(a, tb)]
+            for x, idx in zip(floats, self._slot(slot, len(floats), self.tape_size, tb)):
+                tb.emit(Op.STORE, [self.tape[0], idx, x], [])
             self.tape_instrs.update(id(i) for i in tb.block.instrs)
             body.instrs[:0] = tb.block.instrs
-            self.tape_size += (self.cap + 1) * len(state)
+            ins.attrs["ad.tape"] = (self.tape_size, len(floats))
+            self.tape_size += (self.cap + 1) * len(floats)
 
     def _slot(self, slot: Value, size: int, offset: int, b: Builder) -> list[Value]:
         """The tape indices of the ``size`` values of slot ``slot`` of a loop's part."""
@@ -451,9 +453,10 @@ class _Reverse:
         if ins.attrs.get("ad.tape") is not None:
             last = b.const(self.cap - 1, I32)
             c = b.op(Op.SELECT, I32, b.op(Op.LT, BOOL, k, last), k, last)
-            idx = self._slot(c, len(body.args) - 1, ins.attrs["ad.tape"], b)
-            init = [_from_f32(b.op(Op.LOAD, F32, self.tape[0], i), a.type, b)
-                    for i, a in zip(idx, body.args)] + [c]
+            offset, size = ins.attrs["ad.tape"]
+            xs = iter([b.op(Op.LOAD, F32, self.tape[0], i)
+                       for i in self._slot(c, size, offset, b)])
+            init = [_unpack(xs, a.type, b) for a in body.args[:-1]] + [c]
             count = b.op(Op.SUB, I32, k, c)
         types = [a.type for a in body.args]
         then, other = Block(), Block()
@@ -538,22 +541,28 @@ def _zero(t) -> object:
     return 0.0 if t == F32 else False if t == BOOL else 0
 
 
-def _to_f32(v: Value, b: Builder) -> Value:
-    """A carried value as the Float the tape stores, bit for bit."""
+def _pack(v: Value, b: Builder) -> list[Value]:
+    """A carried value as the Floats the tape stores, bit for bit (a u64: two)."""
     if v.type == F32:
-        return v
+        return [v]
     if v.type == BOOL:
-        return b.op(Op.SELECT, F32, v, b.const(1.0, F32), b.const(0.0, F32))
-    return b.op(Op.BITCAST, F32, v)
+        return [b.op(Op.SELECT, F32, v, b.const(1.0, F32), b.const(0.0, F32))]
+    if v.type == U64:
+        hi = b.op(Op.SHR, U64, v, b.const(32, U64))
+        return [b.op(Op.BITCAST, F32, b.op(Op.CAST, U32, w)) for w in (v, hi)]
+    return [b.op(Op.BITCAST, F32, v)]
 
 
-def _from_f32(x: Value, t, b: Builder) -> Value:
-    """The inverse of :func:`_to_f32` for type ``t``."""
+def _unpack(xs, t, b: Builder) -> Value:
+    """The inverse of :func:`_pack`: a value of type ``t`` from the Floats ``xs``."""
     if t == F32:
-        return x
+        return next(xs)
     if t == BOOL:
-        return b.op(Op.NE, BOOL, x, b.const(0.0, F32))
-    return b.op(Op.BITCAST, t, x)
+        return b.op(Op.NE, BOOL, next(xs), b.const(0.0, F32))
+    if t == U64:
+        lo, hi = (b.op(Op.CAST, U64, b.op(Op.BITCAST, U32, next(xs))) for _ in range(2))
+        return b.op(Op.OR, U64, lo, b.op(Op.SHL, U64, hi, b.const(32, U64)))
+    return b.op(Op.BITCAST, t, next(xs))
 
 
 def _mark_sweep(block: Block, start: int) -> None:
