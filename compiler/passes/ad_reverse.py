@@ -23,11 +23,16 @@ The adjoint is the primal function followed by the reverse sweep of its body.  O
 values (Floats that depend on a seed, not through ``detach``) get adjoints.  An ``if`` with
 an active result also yields every value its branches compute (DCE later drops those the
 adjoint does not read); its adjoint is an ``if`` on the same condition whose branches sweep
-the branch backwards, reading those values.  A ``loop``'s adjoint stores nothing: the primal loop counts its
-iterations N, and the adjoint loop runs k = N-1 .. 0, recomputing the carried state of
-iteration k by running the body k times from the initial values, then the body once more
-forward and its sweep (quadratic in N, no tape: docs/ad.md says why).  The adjoints of the
-outer values a loop body reads are carried by the adjoint loop and added after it.
+the branch backwards, reading those values.  A ``loop``: the primal loop counts its
+iterations N, and the adjoint loop runs k = N-1 .. 0, each time getting the carried state
+before iteration k, then running the body once more forward and its sweep.  In a build
+with ``tape`` = C > 0 the primal loop checkpoints its carried state before iterations
+0 .. C-1 per lane (in ``ad_tape`` at row ``ad_row_tape``, two more kernel arguments:
+passes/ad_checkpoint.py) and the adjoint loads it for k < C, beyond recomputing the body
+k - C + 1 times from the last checkpoint (linear in N up to C).  Loops inside other loops,
+and all with ``tape`` 0, recompute from the initial values (k bodies: quadratic in N;
+docs/ad.md).  The adjoints of the outer values a loop body reads are carried by the
+adjoint loop and added after it.
 Integers, comparisons, ``floor``/``ceil``, loads from other buffers and ray hits have no
 derivative (as in ``ad_forward``).
 """
@@ -38,8 +43,6 @@ from ..ir import (
     BOOL,
     F32,
     I32,
-    U32,
-    U64,
     Block,
     BufferType,
     Builder,
@@ -51,9 +54,9 @@ from ..ir import (
     Value,
     clone_block,
     replace_uses,
-    type_to_json,
 )
 from . import Pass, register
+from .ad_checkpoint import Checkpoints
 from .ad_forward import PARAM_BUFFER
 
 GRAD_BUFFER, ROW = "gPRM", "ad_row"
@@ -61,9 +64,6 @@ GRAD_BUFFER, ROW = "gPRM", "ad_row"
 # into gT at row ad_row_T (d loss / d texel, for bitmap textures' ``<id>.data``)
 TEXEL_BUFFER = "T"
 DIFFERENTIATED = {PARAM_BUFFER: (GRAD_BUFFER, ROW), TEXEL_BUFFER: ("gT", "ad_row_T")}
-# the per-lane checkpoint tape of loops' carried state (a build's ``tape`` > 0): the
-# primal loop stores the state before iteration n < tape at ad_tape[ad_row_tape + ...]
-TAPE, TAPE_ROW = "ad_tape", "ad_row_tape"
 SWEEP = "ad.sweep"  # on the first instruction of a sweep that follows its forward part
 _NO_DERIVATIVE = {Op.FLOOR, Op.CEIL, Op.CAST, Op.BITCAST, Op.CONST, Op.LOAD, Op.REM}
 
@@ -85,10 +85,7 @@ class _Reverse:
 
     def __init__(self, fn: Function, cap: int = 0) -> None:
         self.fn = fn
-        self.cap = cap  # checkpointed iterations per taped loop
-        self.tape = (Value(BufferType(F32), TAPE), Value(I32, TAPE_ROW))
-        self.tape_size = 0  # floats per lane
-        self.tape_instrs: set[int] = set()  # the stores (and their indices) of the tape
+        self.tape = Checkpoints(cap)  # the loops' carried state (cap 0: none)
         # a differentiated buffer (PRM, T) -> its gradient buffer and row
         self.bufs: dict[Value, tuple[Value, Value]] = {
             p.value: (Value(BufferType(F32), DIFFERENTIATED[p.value.name][0]),
@@ -110,8 +107,8 @@ class _Reverse:
         self._activity()
         self._count_loops(fn.body)
         self._export(fn.body)
-        if self.cap > 0:
-            self._tape_loops(fn.body)
+        if self.tape.cap > 0:
+            self.tape.store(fn.body)
         ret = fn.body.instrs.pop()
         assert ret.op is Op.RETURN
         adj: dict[Value, Value] = {}
@@ -140,19 +137,13 @@ class _Reverse:
                 extra += [dict(entry, name=grad.name, leaves=[grad.name]),
                           {"name": row.name, "type": {"kind": "scalar", "dtype": "i32"},
                            "uniform": False, "default": None, "leaves": [row.name]}]
-        if self.tape_size:
-            fn.params += [Param(self.tape[0], uniform=True), Param(self.tape[1])]
-            extra += [{"name": TAPE, "type": type_to_json(self.tape[0].type), "uniform": True,
-                       "default": None, "leaves": [TAPE], "tape_floats": self.tape_size},
-                      {"name": TAPE_ROW, "type": {"kind": "scalar", "dtype": "i32"},
-                       "uniform": False, "default": None, "leaves": [TAPE_ROW]}]
+        extra += self.tape.add_params(fn)
         fn.attrs["abi_params"] = [*fn.attrs.get("abi_params", []), *extra]
         if seeds:
             self._abi_results(seeds)
         for ins in fn.walk():
             ins.attrs.pop("ad.counted", None)
             ins.attrs.pop("ad.export", None)
-            ins.attrs.pop("ad.tape", None)
 
     def _abi_results(self, seeds: list[Param]) -> None:
         fn = self.fn
@@ -253,38 +244,6 @@ class _Reverse:
             out.append(ins)
         block.instrs = out
 
-    def _tape_loops(self, block: Block) -> None:
-        """Checkpoint the carried state of each counted loop that no loop encloses (an
-        inner loop's slots would be overwritten by each outer iteration): at the start of
-        iteration n its body stores the state in slot min(n, cap) of the loop's part of the
-        lane's tape row (slot ``cap`` takes the iterations beyond, never read)."""
-        for ins in block.instrs:
-            if ins.op is not Op.LOOP:
-                for r in ins.regions:
-                    self._tape_loops(r)
-                continue
-            body = ins.regions[0]
-            state, n = body.args[:-1], body.args[-1]
-            if not ins.attrs.get("ad.counted") or any(
-                    a.type not in (F32, I32, U32, BOOL, U64) for a in state):
-                continue
-            tb = Builder(Block(), ins.loc)
-            cap = tb.const(self.cap, I32)
-            slot = tb.op(Op.SELECT, I32, tb.op(Op.LT, BOOL, n, cap), n, cap)
-            floats = [x for a in state for x in _pack(a, tb)]
-            for x, idx in zip(floats, self._slot(slot, len(floats), self.tape_size, tb)):
-                tb.emit(Op.STORE, [self.tape[0], idx, x], [])
-            self.tape_instrs.update(id(i) for i in tb.block.instrs)
-            body.instrs[:0] = tb.block.instrs
-            ins.attrs["ad.tape"] = (self.tape_size, len(floats))
-            self.tape_size += (self.cap + 1) * len(floats)
-
-    def _slot(self, slot: Value, size: int, offset: int, b: Builder) -> list[Value]:
-        """The tape indices of the ``size`` values of slot ``slot`` of a loop's part."""
-        base = b.op(Op.ADD, I32, self.tape[1], b.op(Op.ADD, I32, b.op(
-            Op.MUL, I32, slot, b.const(size, I32)), b.const(offset, I32)))
-        return [base, *[b.op(Op.ADD, I32, base, b.const(j, I32)) for j in range(1, size)]]
-
     def _export(self, block: Block) -> None:
         """Make each ``if`` with an active result also yield every value its branches
         compute (innermost first, so a branch's exports include its inner ifs'): the
@@ -341,7 +300,7 @@ class _Reverse:
         m: dict[Value, Value] = dict(self.sub)
         m.update(zip(block.args, args))
         tmp = Block()
-        tmp.instrs = [i for i in block.instrs[:-1] if id(i) not in self.tape_instrs]
+        tmp.instrs = [i for i in block.instrs[:-1] if id(i) not in self.tape.stores]
         new = clone_block(tmp, m).instrs
         b.block.instrs += new
         for old, v in m.items():
@@ -450,14 +409,7 @@ class _Reverse:
         body run k times from them, or, for a taped loop, run k - c times from checkpoint
         c = min(k, cap - 1) (0 times for k < cap)."""
         body, init, count = ins.regions[0], [self.P(v) for v in ins.operands], k
-        if ins.attrs.get("ad.tape") is not None:
-            last = b.const(self.cap - 1, I32)
-            c = b.op(Op.SELECT, I32, b.op(Op.LT, BOOL, k, last), k, last)
-            offset, size = ins.attrs["ad.tape"]
-            xs = iter([b.op(Op.LOAD, F32, self.tape[0], i)
-                       for i in self._slot(c, size, offset, b)])
-            init = [_unpack(xs, a.type, b) for a in body.args[:-1]] + [c]
-            count = b.op(Op.SUB, I32, k, c)
+        init, count = self.tape.load(ins, k, b) or (init, count)
         types = [a.type for a in body.args]
         then, other = Block(), Block()
         tb = Builder(then, ins.loc)
@@ -539,30 +491,6 @@ _F32_JSON = {"kind": "scalar", "dtype": "f32"}
 
 def _zero(t) -> object:
     return 0.0 if t == F32 else False if t == BOOL else 0
-
-
-def _pack(v: Value, b: Builder) -> list[Value]:
-    """A carried value as the Floats the tape stores, bit for bit (a u64: two)."""
-    if v.type == F32:
-        return [v]
-    if v.type == BOOL:
-        return [b.op(Op.SELECT, F32, v, b.const(1.0, F32), b.const(0.0, F32))]
-    if v.type == U64:
-        hi = b.op(Op.SHR, U64, v, b.const(32, U64))
-        return [b.op(Op.BITCAST, F32, b.op(Op.CAST, U32, w)) for w in (v, hi)]
-    return [b.op(Op.BITCAST, F32, v)]
-
-
-def _unpack(xs, t, b: Builder) -> Value:
-    """The inverse of :func:`_pack`: a value of type ``t`` from the Floats ``xs``."""
-    if t == F32:
-        return next(xs)
-    if t == BOOL:
-        return b.op(Op.NE, BOOL, next(xs), b.const(0.0, F32))
-    if t == U64:
-        lo, hi = (b.op(Op.CAST, U64, b.op(Op.BITCAST, U32, next(xs))) for _ in range(2))
-        return b.op(Op.OR, U64, lo, b.op(Op.SHL, U64, hi, b.const(32, U64)))
-    return b.op(Op.BITCAST, t, next(xs))
 
 
 def _mark_sweep(block: Block, start: int) -> None:
