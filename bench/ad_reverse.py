@@ -23,6 +23,7 @@ from rdsl.compiler.build import Build
 from rdsl.compiler.driver import frontend, pipeline, run_passes
 from rdsl.compiler.ir import F32, Op
 from rdsl.compiler.passes.specialize import parameter_slots
+from rdsl.runtime.render.backward import TAPE
 
 CBOX = Path(__file__).resolve().parents[1] / ".." / "shared" / "scenes" / "cbox" / "cbox.xml"
 NAMES = ["red.reflectance.value", "green.reflectance.value", "light.emitter.radiance.value"]
@@ -34,7 +35,7 @@ def adjoint_state(scene) -> tuple[int, int, int]:
     scene.use_generic()
     scene.compile()
     spec = parameter_slots(scene.scene_spec, scene.build.model)[0]
-    build = Build(scene.build.target, scene.build.model, "reverse")
+    build = Build(scene.build.target, scene.build.model, "reverse", tape=TAPE)
     module = frontend(scene.kernel_src, "cbox.rdsl", scene.search_paths)
     run_passes(module, pipeline(build, spec), out=io.StringIO(), stop_after="ad_reverse")
     fn = module.functions["render_sample"]
@@ -42,7 +43,7 @@ def adjoint_state(scene) -> tuple[int, int, int]:
              and i.regions[0].args[0].name == "ad.k"]
     carried = max(sum(4 if a.type == F32 or a.type.bits <= 32 else 8
                       for a in i.regions[0].args) for i in loops)
-    stores = sum(1 for i in fn.walk() if i.op is Op.STORE and i.operands[0].name != "gPRM")
+    stores = sum(1 for i in fn.walk() if i.op is Op.STORE and i.operands[0].name == "ad_tape")
     return carried, stores * 4, scene.prm.size * 4
 
 
@@ -81,8 +82,9 @@ def main() -> int:
             carried, taped, grad = adjoint_state(scene)
             print(f"adjoint of the bounce loop: {carried} bytes per lane carried (k, the "
                   f"adjoints of the carried values), {taped} bytes per lane per bounce "
-                  f"stored (no tape: the state is recomputed); gradient rows: {grad} bytes "
-                  "each, 64 per thread")
+                  f"stored (a checkpoint of the carried state for each of the first {TAPE} "
+                  f"bounces, {(TAPE + 1) * taped} bytes per lane's tape row); gradient rows: "
+                  f"{grad} bytes each, 64 per thread")
         rows.append((depth, *measure(scene, args)))
     print(f"{'max_depth':>9} {'render s':>9} {'backward s':>10} {'bwd/render':>10} "
           f"{'fwd-mode s':>10} {'fwd/bwd':>8}")

@@ -27,6 +27,9 @@ class Build:
     ad: str | None = None
     # reverse mode: the `eliminate` pass's threshold (0: not run; passes/eliminate.py)
     eliminate: int = 0
+    # reverse mode: iterations of a loop whose carried state the adjoint kernel checkpoints
+    # per lane (0: it recomputes the state from the start; passes/ad_reverse.py)
+    tape: int = 0
 
     @classmethod
     def of(cls, target: str | Target = "host", variant: str | ColorModel = "rgb",

@@ -44,6 +44,8 @@ def cache_key(source_text: str, files: Iterable[os.PathLike | str], build: Build
         part("ad", build.ad)
     if getattr(build, "eliminate", 0):
         part("eliminate", str(build.eliminate))
+    if getattr(build, "tape", 0):
+        part("tape", str(build.tape))
     part("options", json.dumps(options, sort_keys=True, default=repr))
     part("source", source_text)
     for f in files:

@@ -63,6 +63,30 @@ def test_adjoint_kernel_matches_forward_mode_dot_products():
     np.testing.assert_allclose(gx, dx * a, rtol=1e-5, atol=1e-6)  # d/dx: a VJP result
 
 
+def test_checkpoint_tape_gives_the_recomputed_gradients_bit_for_bit():
+    # the loop runs up to 6 times: caps 1-3 also recompute beyond the last checkpoint
+    import dataclasses
+
+    x = np.linspace(-0.5, 2.0, 37).astype(np.float32)
+    prm = np.array([0.7, 1.3, 0.8, 2.0, 0.9], np.float32)
+    a = np.random.default_rng(0).standard_normal(x.size).astype(np.float32)
+    rows = np.arange(x.size, dtype=np.int32) * NPRM
+    build = rdsl.Build.of("host", "rgb", ad="reverse")
+    out = {}
+    for cap in (0, 1, 3, 16):
+        k = rdsl.jit(LOOP, build=dataclasses.replace(build, tape=cap)).k
+        tape = [p.get("tape_floats") for p in k.info["params"] if p["name"] == "ad_tape"]
+        assert len(tape) == (cap > 0) and all(t % (cap + 1) == 0 for t in tape)
+        extra = [np.zeros(x.size * tape[0], np.float32),
+                 np.arange(x.size, dtype=np.int32) * tape[0]] if tape else []
+        grad = np.zeros(x.size * NPRM, np.float32)
+        value, gx = k(x, prm, a, grad, rows, *extra)
+        out[cap] = (value, gx, grad)
+    for cap in (1, 3, 16):
+        for want, got in zip(out[0], out[cap]):
+            np.testing.assert_array_equal(got, want)
+
+
 def test_detach_stops_the_gradient():
     rev, _ = _builds("fn k(PRM: [Float]) -> Float { return detach(PRM[0]) * PRM[0]; }")
     grad = np.zeros(1, np.float32)
@@ -100,6 +124,27 @@ def test_cbox_backward_matches_forward_mode_with_russian_roulette():
     scene = rdsl.load_scene(CBOX, res=16, max_depth=-1)
     scene.params["path.rr_depth"] = 2
     _dot_test(scene, NAMES)
+
+
+@needs_cbox
+def test_cbox_backward_tape_equals_recomputation_with_russian_roulette():
+    # the default checkpoints 16 bounces (runtime/render/backward.py); 2 makes most paths
+    # longer than the tape, so the adjoint recomputes from the last checkpoint
+    scene = rdsl.load_scene(CBOX, res=8, max_depth=-1)
+    scene.params["path.rr_depth"] = 2
+    d = np.random.default_rng(3).standard_normal((8, 8, 3))
+    got = {t: scene.backward(d, params=NAMES, spp=4, seed=9, tape=t) for t in (0, 2, 16)}
+    from rdsl.runtime.render.differentiable import ad_twin
+
+    for t in (2, 16):  # the bounce loop's state is on the tape: one slot past the cap
+        kernel = next(k for k in ad_twin(scene, "reverse", 0, t).compile().manifest[
+            "kernels"] if k["name"] == "render_sample")
+        floats = [p["tape_floats"] for p in kernel["params"] if p["name"] == "ad_tape"]
+        assert len(floats) == 1 and floats[0] % (t + 1) == 0 and floats[0] > t + 1
+    assert any(np.any(g != 0) for g in got[0].values())
+    for t in (2, 16):
+        for name in NAMES:
+            np.testing.assert_array_equal(got[t][name], got[0][name], err_msg=f"{t} {name}")
 
 
 @needs_cbox

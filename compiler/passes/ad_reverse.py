@@ -23,11 +23,16 @@ The adjoint is the primal function followed by the reverse sweep of its body.  O
 values (Floats that depend on a seed, not through ``detach``) get adjoints.  An ``if`` with
 an active result also yields every value its branches compute (DCE later drops those the
 adjoint does not read); its adjoint is an ``if`` on the same condition whose branches sweep
-the branch backwards, reading those values.  A ``loop``'s adjoint stores nothing: the primal loop counts its
-iterations N, and the adjoint loop runs k = N-1 .. 0, recomputing the carried state of
-iteration k by running the body k times from the initial values, then the body once more
-forward and its sweep (quadratic in N, no tape: docs/ad.md says why).  The adjoints of the
-outer values a loop body reads are carried by the adjoint loop and added after it.
+the branch backwards, reading those values.  A ``loop``: the primal loop counts its
+iterations N, and the adjoint loop runs k = N-1 .. 0, each time getting the carried state
+before iteration k, then running the body once more forward and its sweep.  In a build
+with ``tape`` = C > 0 the primal loop checkpoints its carried state before iterations
+0 .. C-1 per lane (in ``ad_tape`` at row ``ad_row_tape``, two more kernel arguments:
+passes/ad_checkpoint.py) and the adjoint loads it for k < C, beyond recomputing the body
+k - C + 1 times from the last checkpoint (linear in N up to C).  Loops inside other loops,
+and all with ``tape`` 0, recompute from the initial values (k bodies: quadratic in N;
+docs/ad.md).  The adjoints of the outer values a loop body reads are carried by the
+adjoint loop and added after it.
 Integers, comparisons, ``floor``/``ceil``, loads from other buffers and ray hits have no
 derivative (as in ``ad_forward``).
 """
@@ -51,6 +56,7 @@ from ..ir import (
     replace_uses,
 )
 from . import Pass, register
+from .ad_checkpoint import Checkpoints
 from .ad_forward import PARAM_BUFFER
 
 GRAD_BUFFER, ROW = "gPRM", "ad_row"
@@ -67,16 +73,20 @@ _NO_DERIVATIVE = {Op.FLOOR, Op.CEIL, Op.CAST, Op.BITCAST, Op.CONST, Op.LOAD, Op.
 class AdReverse(Pass):
     name = "ad_reverse"
 
+    def __init__(self, tape: int = 0) -> None:
+        self.tape = tape  # iterations checkpointed per loop (0: recompute from the start)
+
     def run(self, module: Module) -> None:
         for fn in module.functions.values():
-            _Reverse(fn).run()
+            _Reverse(fn, self.tape).run()
 
 
 class _Reverse:
     """The adjoint of one function."""
 
-    def __init__(self, fn: Function) -> None:
+    def __init__(self, fn: Function, cap: int = 0) -> None:
         self.fn = fn
+        self.tape = Checkpoints(cap)  # the loops' carried state (cap 0: none)
         # a differentiated buffer (PRM, T) -> its gradient buffer and row
         self.bufs: dict[Value, tuple[Value, Value]] = {
             p.value: (Value(BufferType(F32), DIFFERENTIATED[p.value.name][0]),
@@ -98,6 +108,8 @@ class _Reverse:
         self._activity()
         self._count_loops(fn.body)
         self._export(fn.body)
+        if self.tape.cap > 0:
+            self.tape.store(fn.body)
         ret = fn.body.instrs.pop()
         assert ret.op is Op.RETURN
         adj: dict[Value, Value] = {}
@@ -126,6 +138,7 @@ class _Reverse:
                 extra += [dict(entry, name=grad.name, leaves=[grad.name]),
                           {"name": row.name, "type": {"kind": "scalar", "dtype": "i32"},
                            "uniform": False, "default": None, "leaves": [row.name]}]
+        extra += self.tape.add_params(fn)
         fn.attrs["abi_params"] = [*fn.attrs.get("abi_params", []), *extra]
         if seeds:
             self._abi_results(seeds)
@@ -288,7 +301,7 @@ class _Reverse:
         m: dict[Value, Value] = dict(self.sub)
         m.update(zip(block.args, args))
         tmp = Block()
-        tmp.instrs = block.instrs[:-1]
+        tmp.instrs = [i for i in block.instrs[:-1] if id(i) not in self.tape.stores]
         new = clone_block(tmp, m).instrs
         b.block.instrs += new
         for old, v in m.items():
@@ -394,8 +407,10 @@ class _Reverse:
 
     def _state_at(self, ins: Instr, k: Value, b: Builder) -> list[Value]:
         """The loop's carried values before iteration ``k`` (0 = the initial values): the
-        body run k times from them."""
-        body, init = ins.regions[0], [self.P(v) for v in ins.operands]
+        body run k times from them, or, for a taped loop, run k - c times from checkpoint
+        c = min(k, cap - 1) (0 times for k < cap)."""
+        body, init, count = ins.regions[0], [self.P(v) for v in ins.operands], k
+        init, count = self.tape.load(ins, k, b) or (init, count)
         types = [a.type for a in body.args]
         then, other = Block(), Block()
         tb = Builder(then, ins.loc)
@@ -406,11 +421,11 @@ class _Reverse:
         _, m = self.clone_into(body, s, bb)
         y = [m.get(v, v) for v in body.instrs[-1].operands[1:]]
         i1 = bb.op(Op.ADD, I32, i, bb.const(1, I32))
-        bb.yield_(bb.op(Op.LT, BOOL, i1, k), i1, *y)
+        bb.yield_(bb.op(Op.LT, BOOL, i1, count), i1, *y)
         inner = tb.emit(Op.LOOP, [tb.const(0, I32), *init], [I32, *types], regions=[lb])
         tb.yield_(*inner.results[1:])
         Builder(other, ins.loc).yield_(*init)
-        cond = b.op(Op.GT, BOOL, k, b.const(0, I32))
+        cond = b.op(Op.GT, BOOL, count, b.const(0, I32))
         return b.emit(Op.IF, [cond], types, regions=[then, other]).results
 
     # long: one rule per op, as a table would hold them

@@ -86,13 +86,16 @@ LANES = 16  # the widest SIMD packet: lanes of one packet add gradients into row
 # own (array position mod LANES), each part of the adjoint pass into LANES rows (_Parts)
 PARTS_PER_THREAD = 4
 CELLS_AT_ONCE = 2048
+TAPE = 16  # bounces whose carried state the adjoint kernel checkpoints per lane (the
+# rest it recomputes from the last checkpoint: compiler/passes/ad_reverse.py)
 
 
 # long: two passes over the batches, then the reduction
 def backward(scene: Scene, d_img: Any, params: list[str], spp: int | None = None,
              seed: int | None = None, threads: int | None = None,
-             eliminate: bool | int = False) -> dict[str, np.ndarray]:
-    """d loss / d parameter for each name of ``params``, given d loss / d image."""
+             eliminate: bool | int = False, tape: int = TAPE) -> dict[str, np.ndarray]:
+    """d loss / d parameter for each name of ``params``, given d loss / d image (``tape``:
+    bounces checkpointed per lane, 0 to recompute each bounce's state from the start)."""
     from .renderer import BATCH_SAMPLES
 
     d, chosen = _check(scene, d_img, params)
@@ -100,7 +103,7 @@ def backward(scene: Scene, d_img: Any, params: list[str], spp: int | None = None
     seed = scene.seed if seed is None else int(seed)
     scene.use_generic()
     plain = scene.compile()
-    twin = ad_twin(scene, "reverse", elimination_threshold("reverse", eliminate))
+    twin = ad_twin(scene, "reverse", elimination_threshold("reverse", eliminate), tape)
     mod = twin.compile()
     for m in (plain, mod):
         if m.traces_rays:
@@ -147,7 +150,10 @@ def backward(scene: Scene, d_img: Any, params: list[str], spp: int | None = None
     names = [p["name"] for p in kernel["params"]]
     parts = _Parts(prm, scene.buffers.T, any(isinstance(c, Texels) for c in chosen.values()),
                    threads)
-    uniform = {"gPRM": parts.gPRM, "gT": parts.gT}
+    floats = next((p.get("tape_floats", 0) for p in kernel["params"]
+                   if p["name"] == "ad_tape"), 0)
+    tape_rows = np.zeros(max(1, parts.parts * LANES * floats), np.float32)  # per lane
+    uniform = {"gPRM": parts.gPRM, "gT": parts.gT, "ad_tape": tape_rows}
     for (j, rs), (wx, wy) in zip(batches, outs):  # 2. and 3.
         a = _sample_adjoints(wx, wy, g_qrx)
         seeds = {f"a_ret_value_{c}": a[:, i] for i, c in enumerate("xyz"[:a.shape[1]])}
@@ -155,7 +161,7 @@ def backward(scene: Scene, d_img: Any, params: list[str], spp: int | None = None
             seeds = {"a_ret_value": a[:, 0]}
         varying = {"ad_row": parts.rows(j.size, prm.size), "ad_row_T":
                    parts.rows(j.size, scene.buffers.T.size) if parts.texels else
-                   np.zeros(j.size, np.int32)} | seeds
+                   np.zeros(j.size, np.int32), "ad_row_tape": parts.rows(j.size, floats)} | seeds
         head = [rs, *scene.buffers.args(), prm]
         rest = [(uniform[x], False) if x in uniform else
                 (varying.get(x, np.zeros(j.size, np.float32)), True)

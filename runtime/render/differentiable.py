@@ -175,19 +175,20 @@ def _check_tables(scene: Scene, name: str) -> None:
                                "value (a -D default or the XML)")
 
 
-def ad_twin(scene: Scene, ad: str, eliminate: int = 0) -> Scene:
+def ad_twin(scene: Scene, ad: str, eliminate: int = 0, tape: int = 0) -> Scene:
     """The scene's twin for differentiation mode ``ad``: same description and buffers, a
     generic build with tangents ("forward": its film also takes the derivative of the
     radiance) or adjoints ("reverse": runtime/render/backward.py; ``eliminate``: the
-    threshold of graph elimination, 0 for none)."""
-    attr = f"_{ad}" + (f"_e{eliminate}" if eliminate else "")
+    threshold of graph elimination, 0 for none; ``tape``: bounces checkpointed per lane,
+    0 to recompute them all)."""
+    attr = f"_{ad}" + (f"_e{eliminate}" if eliminate else "") + (f"_t{tape}" if tape else "")
     twin = getattr(scene, attr, None)
     if twin is None or twin.desc is not scene.desc:
         from .renderer import Scene as SceneClass
 
         twin = SceneClass.__new__(SceneClass)
         twin.__dict__.update(scene.__dict__)
-        twin.build = Build(scene.build.target, scene.build.model, ad, eliminate)
+        twin.build = Build(scene.build.target, scene.build.model, ad, eliminate, tape)
         twin.specialize, twin.derivative, twin._prm_set = False, ad == "forward", True
         twin._module = None
         twin._forward = twin._reverse = None

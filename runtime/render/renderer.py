@@ -259,13 +259,16 @@ class Scene:
 
     def backward(self, d_img: Any, params: list[str], spp: int | None = None,
                  seed: int | None = None, threads: int | None = None,
-                 eliminate: bool | int = False) -> dict[str, np.ndarray]:
+                 eliminate: bool | int = False, tape: int | None = None
+                 ) -> dict[str, np.ndarray]:
         """d loss / d parameter for every name of ``params`` from d loss / d image, by one
         adjoint render (reverse mode): runtime/render/backward.py.  ``eliminate``: build
-        the adjoint kernel with graph elimination (True: threshold 10; docs/ad.md)."""
-        from .backward import backward
+        the adjoint kernel with graph elimination (True: threshold 10; docs/ad.md);
+        ``tape``: bounces checkpointed per lane (default 16; 0: recompute them)."""
+        from .backward import TAPE, backward
 
-        return backward(self, d_img, params, spp, seed, threads, eliminate)
+        return backward(self, d_img, params, spp, seed, threads, eliminate,
+                        TAPE if tape is None else int(tape))
 
     def _folding(self, scene: SceneSpec) -> list[str]:
         """What the build folds (specialized) or reads at run time (generic), for the report."""

@@ -1,0 +1,105 @@
+"""The per-lane checkpoint tape of ``ad_reverse``: a loop's carried state, stored by the
+primal loop and loaded by the adjoint loop (docs/ad.md, "Reverse mode").
+
+Not a pass: ``ad_reverse`` calls it in a build with ``tape`` = C > 0.  Each counted loop
+(a loop with an active carried value) that no other loop encloses stores, at the start of
+iteration n, its carried state (u64 as two Floats, Bools as 0 or 1, the rest bit for bit)
+in slot min(n, C) of its part of the lane's row of ``ad_tape`` (slot C takes the
+iterations beyond and is never read).  The row starts at ``ad_row_tape``; the kernel gets
+the two as arguments after the others (a uniform Float buffer, a varying Int) and the
+manifest's ``tape_floats`` is the row's length.  A loop inside another loop is not taped
+(each outer iteration would overwrite its slots): its adjoint recomputes from the start.
+"""
+
+from __future__ import annotations
+
+from ..ir import BOOL, F32, I32, U32, U64, Block, BufferType, Builder, Function, Instr, Op, \
+    Param, Value, type_to_json
+
+TAPE, TAPE_ROW = "ad_tape", "ad_row_tape"
+_TYPES = (F32, I32, U32, BOOL, U64)
+
+
+class Checkpoints:
+    """The tape of one function: ``cap`` (C) checkpoints per taped loop."""
+
+    def __init__(self, cap: int) -> None:
+        self.cap = cap
+        self.buf, self.row = Value(BufferType(F32), TAPE), Value(I32, TAPE_ROW)
+        self.size = 0  # floats per lane
+        self.stores: set[int] = set()  # the instructions the primal loops got (their ids)
+        self.loops: dict[int, tuple[int, int]] = {}  # a taped loop -> (offset, floats)
+
+    def store(self, block: Block) -> None:
+        """Make each counted loop of ``block`` that no loop encloses store its state."""
+        for ins in block.instrs:
+            if ins.op is not Op.LOOP:
+                for r in ins.regions:
+                    self.store(r)
+                continue
+            body = ins.regions[0]
+            state, n = body.args[:-1], body.args[-1]  # n: ad_reverse's trip counter
+            if not ins.attrs.get("ad.counted") or any(a.type not in _TYPES for a in state):
+                continue
+            tb = Builder(Block(), ins.loc)
+            cap = tb.const(self.cap, I32)
+            slot = tb.op(Op.SELECT, I32, tb.op(Op.LT, BOOL, n, cap), n, cap)
+            floats = [x for a in state for x in _pack(a, tb)]
+            for x, idx in zip(floats, self._slot(slot, len(floats), self.size, tb)):
+                tb.emit(Op.STORE, [self.buf, idx, x], [])
+            self.stores.update(id(i) for i in tb.block.instrs)
+            body.instrs[:0] = tb.block.instrs
+            self.loops[id(ins)] = (self.size, len(floats))
+            self.size += (self.cap + 1) * len(floats)
+
+    def load(self, ins: Instr, k: Value, b: Builder) -> tuple[list[Value], Value] | None:
+        """For taped loop ``ins``: its carried values at checkpoint c = min(k, C - 1) and
+        k - c, the iterations left to run from there to reach iteration k (else None)."""
+        if id(ins) not in self.loops:
+            return None
+        offset, size = self.loops[id(ins)]
+        last = b.const(self.cap - 1, I32)
+        c = b.op(Op.SELECT, I32, b.op(Op.LT, BOOL, k, last), k, last)
+        xs = iter([b.op(Op.LOAD, F32, self.buf, i) for i in self._slot(c, size, offset, b)])
+        state = [_unpack(xs, a.type, b) for a in ins.regions[0].args[:-1]]
+        return [*state, c], b.op(Op.SUB, I32, k, c)
+
+    def add_params(self, fn: Function) -> list[dict]:
+        """Give ``fn`` the tape's arguments, if it has a tape; their ABI entries."""
+        if not self.size:
+            return []
+        fn.params += [Param(self.buf, uniform=True), Param(self.row)]
+        return [{"name": TAPE, "type": type_to_json(self.buf.type), "uniform": True,
+                 "default": None, "leaves": [TAPE], "tape_floats": self.size},
+                {"name": TAPE_ROW, "type": {"kind": "scalar", "dtype": "i32"},
+                 "uniform": False, "default": None, "leaves": [TAPE_ROW]}]
+
+    def _slot(self, slot: Value, size: int, offset: int, b: Builder) -> list[Value]:
+        """The tape indices of the ``size`` values of slot ``slot`` of a loop's part."""
+        base = b.op(Op.ADD, I32, self.row, b.op(Op.ADD, I32, b.op(
+            Op.MUL, I32, slot, b.const(size, I32)), b.const(offset, I32)))
+        return [base, *[b.op(Op.ADD, I32, base, b.const(j, I32)) for j in range(1, size)]]
+
+
+def _pack(v: Value, b: Builder) -> list[Value]:
+    """A carried value as the Floats the tape stores, bit for bit (a u64: two)."""
+    if v.type == F32:
+        return [v]
+    if v.type == BOOL:
+        return [b.op(Op.SELECT, F32, v, b.const(1.0, F32), b.const(0.0, F32))]
+    if v.type == U64:
+        hi = b.op(Op.SHR, U64, v, b.const(32, U64))
+        return [b.op(Op.BITCAST, F32, b.op(Op.CAST, U32, w)) for w in (v, hi)]
+    return [b.op(Op.BITCAST, F32, v)]
+
+
+def _unpack(xs, t, b: Builder) -> Value:
+    """The inverse of :func:`_pack`: a value of type ``t`` from the Floats ``xs``."""
+    if t == F32:
+        return next(xs)
+    if t == BOOL:
+        return b.op(Op.NE, BOOL, next(xs), b.const(0.0, F32))
+    if t == U64:
+        lo, hi = (b.op(Op.CAST, U64, b.op(Op.BITCAST, U32, next(xs))) for _ in range(2))
+        return b.op(Op.OR, U64, lo, b.op(Op.SHL, U64, hi, b.const(32, U64)))
+    return b.op(Op.BITCAST, t, next(xs))
