@@ -255,3 +255,39 @@ def test_roughdielectric_transmission_pdf_near_the_critical_angle(int_ior, ext_i
     assert abs(pdf / truth - 1) < 1e-4, (pdf, truth)
     ev = float(np.asarray(h.eval(surface(tile(wi, 1)), wo, **params)).reshape(-1)[0])
     assert ev > 0
+
+
+def conductor_fresnel64(c: float, eta: float, k: float) -> float:
+    """Unpolarized conductor Fresnel reflectance (complex IOR eta + i k) in complex float64."""
+    n = complex(eta, k)
+    ct = np.sqrt(1 - (1 - c * c) / n**2 + 0j)
+    rs, rp = (c - n * ct) / (c + n * ct), (n * c - ct) / (n * c + ct)
+    return 0.5 * (abs(rs) ** 2 + abs(rp) ** 2)
+
+
+@pytest.mark.parametrize("cos_i,eta,wo", [
+    (1e-3, 4.0, (-0.9210963249206543, -0.38933461904525757, 0.00034335022792220116)),
+    (1e-7, 2.0, (-0.9210136532783508, -0.38952919840812683, 0.0008712213020771742)),
+    (1e-5, 4.0, (-0.9211124181747437, -0.3892960250377655, 0.0006735063507221639)),
+])
+def test_roughconductor_eval_at_grazing_reflection(cos_i, eta, wo):
+    """`rdsl stress` (alpha 0.1, k 1): sample()'s weight and eval()/pdf() at its wo disagreed
+    by 1.4e-4 .. 1.9e-4 near grazing reflection (|wi + wo| ~ 1e-3). The weight was right:
+    eval's F(dot(wi, m)) moved with the ~1e-7 that float32 wi and wo are off unit length.
+    eval()/pdf() = F(wi.m) G1(wo, m) against float64 at the unit directions; Mitsuba 3's
+    eval / pdf is as far off as rdsl's was."""
+    s = np.sqrt(1 - cos_i**2)
+    wi = np.array([s * np.cos(0.4), s * np.sin(0.4), cos_i], np.float32)
+    wo = np.array([wo], np.float32)
+    h = Harness("roughconductor", "mono")
+    si = surface(tile(wi, 1))
+    ratio = float(np.asarray(h.eval(si, wo, eta=eta)).reshape(-1)[0]
+                  / np.asarray(h.pdf(si, wo, eta=eta))[0])
+    u, v = (x.astype(np.float64) / np.linalg.norm(x.astype(np.float64)) for x in (wi, wo[0]))
+    m = (u + v) / np.linalg.norm(u + v)
+    g1 = 2 / (1 + np.sqrt(1 + 0.01 * (v[0] ** 2 + v[1] ** 2) / v[2] ** 2))
+    truth = conductor_fresnel64(float(u @ m), eta, 1.0) * g1
+    assert abs(ratio / truth - 1) < 2e-5, (ratio, truth)
+    ev_mi, pdf_mi = mitsuba_eval_pdf({"type": "roughconductor", "alpha": 0.1, "eta": eta,
+                                      "k": 1.0, "distribution": "ggx"}, wi, wo)
+    assert abs(ev_mi[0] / pdf_mi[0] / truth - 1) > 1e-4  # Mitsuba's float32 eval is off here
