@@ -130,13 +130,13 @@ def compile_kernels(source_or_path: str | Path, build: Build, filename: str | No
     with gc_paused():
         module = frontend(source_or_path, filename, search_paths)
         if exports is not None:
-            _keep_exports(module, exports)
+            keep_exports(module, exports)
         run_passes(module, pipeline(build, scene, report), verify=verify_mode())
     module.attrs["target"] = build.target.name
     return module, source_files(source_or_path, search_paths or (), filename=filename)
 
 
-def _keep_exports(module: Module, exports: Sequence[str]) -> None:
+def keep_exports(module: Module, exports: Sequence[str]) -> None:
     """Unexport every kernel not named in ``exports``; a name the file does not export is a
     diagnostic listing those it does."""
     exported = [n for n, f in module.functions.items() if f.attrs.get("export")]

@@ -19,7 +19,7 @@ import pytest
 import rdsl
 from rdsl.compiler.build import Build
 from rdsl.compiler.diagnostics import CompileError
-from rdsl.compiler.driver import frontend, pipeline, run_passes
+from rdsl.compiler.driver import frontend, keep_exports, pipeline, run_passes
 from rdsl.compiler.passes.ad_tape import tape
 from rdsl.compiler.passes.eliminate import Eliminate
 from rdsl.compiler.printer import print_module
@@ -118,6 +118,7 @@ def test_loop_and_branch_gradients_unchanged():
 
 def _tape(source, threshold, fn, spec=None, search=None):
     m = frontend(source, "k.rdsl", search) if isinstance(source, str) else frontend(source)
+    keep_exports(m, [fn])  # the other kernels of the file are not compiled
     build = Build.of("host", "rgb", ad="reverse", eliminate=threshold)
     run_passes(m, pipeline(build, spec), out=io.StringIO(),
                stop_after="eliminate" if threshold else "ad_reverse")
