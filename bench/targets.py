@@ -59,15 +59,18 @@ from accel import BIG, terrain
 MESH_N = 230  # vertices per side of the height field: 2 * 229^2 = 104,882 triangles
 
 
-def builds() -> list[tuple[str, str, int | None, str, dict[str, str]]]:
-    """(label, target, width, accel, environment) of every build, the reference first."""
+def builds(only: str = "") -> list[tuple[str, str, int | None, str, dict[str, str]]]:
+    """(label, target, width, accel, environment) of every build, the reference first;
+    ``only``: comma-separated targets (``avx512,opencl``...) to keep besides the first."""
     llvm = "avx512" if host_supports(get_target("avx512")) else host_target().name
     w = get_target(llvm).width
-    return [(f"{llvm}+Embree", llvm, None, "embree", {}),
-            (f"{llvm}+bvh", llvm, None, "bvh", {}),
-            (f"c{w} -O3", "c", w, "bvh", {"RDSL_CFLAGS": "-O3"}),
-            (f"opencl{w} (PoCL)", "opencl", w, "bvh", {}),
-            ("spirv (lavapipe)", "spirv", None, "bvh", {})]
+    out = [(f"{llvm}+Embree", llvm, None, "embree", {}),
+           (f"{llvm}+bvh", llvm, None, "bvh", {}),
+           (f"c{w} -O3", "c", w, "bvh", {"RDSL_CFLAGS": "-O3"}),
+           (f"opencl{w} (PoCL)", "opencl", w, "bvh", {}),
+           ("spirv (lavapipe)", "spirv", None, "bvh", {})]
+    keep = set(filter(None, only.split(",")))
+    return [b for k, b in enumerate(out) if not keep or k == 0 or b[1] in keep]
 
 
 def mesh_scene(res: int) -> Path:
@@ -133,11 +136,12 @@ def load(path: Path, defines: dict[str, int], target: str, width: int | None, ac
     return scene
 
 
-def renderers(path: Path, defines: dict[str, int], mitsuba: bool) -> list[tuple[str, Any]]:
+def renderers(path: Path, defines: dict[str, int], mitsuba: bool,
+              only: str = "") -> list[tuple[str, Any]]:
     """(label, render(spp, seed) -> RGB image) of every build, compiled; Mitsuba 3's
     ``llvm_ad_rgb`` (else ``scalar_rgb``) last with ``mitsuba``."""
     out = []
-    for label, target, width, accel, env in builds():
+    for label, target, width, accel, env in builds(only):
         scene = load(path, defines, target, width, accel, env)
         out.append((label, lambda spp, seed, s=scene: s.render(spp=spp, seed=seed)[..., :3]))
     if mitsuba:
@@ -222,14 +226,17 @@ def main() -> None:
     ap.add_argument("--ref-spp", type=int, default=1024)
     ap.add_argument("--no-mitsuba", dest="mitsuba", action="store_false",
                     help="leave out the Mitsuba 3 row (pip install mitsuba; libLLVM 19)")
+    ap.add_argument("--builds", default="", help="comma-separated targets to run besides "
+                    "the first build, e.g. opencl,ptx (default: all)")
+    ap.add_argument("--cbox-only", action="store_true", help="leave out the mesh scene")
     args = ap.parse_args()
     OUT.mkdir(parents=True, exist_ok=True)
     first = builds()[0]
     cbox_ref = read_exr(CBOX.with_name("cbox_ref_rgb.exr"))[..., :3]
-    mesh = mesh_scene(args.mesh_res)
-    scenes = {"Cornell box (256x256, max_depth 8)": (CBOX, {}, cbox_ref),
-              f"height field, {2 * (MESH_N - 1) ** 2} triangles ({args.mesh_res}x"
-              f"{args.mesh_res}, max_depth 4)": (mesh, {}, None)}
+    scenes = {"Cornell box (256x256, max_depth 8)": (CBOX, {}, cbox_ref)}
+    if not args.cbox_only:
+        scenes[f"height field, {2 * (MESH_N - 1) ** 2} triangles ({args.mesh_res}x"
+              f"{args.mesh_res}, max_depth 4)"] = (mesh_scene(args.mesh_res), {}, None)
     print(f"{os.cpu_count()} cores; median of {args.repeat} alternated renders of about "
           f"{args.seconds} s each", flush=True)
     for name, (path, defines, ref) in scenes.items():
@@ -238,8 +245,9 @@ def main() -> None:
             ref = reference(path, args.ref_spp, (first[1], first[3]))
         pixels = ref.shape[0] * ref.shape[1]
         rays = rays_per_path(path, defines, first[1], pixels)
-        rows = measure(renderers(path, defines, args.mitsuba), ref, args)
-        table(name, rows, pixels, rays, ptx_note(path, defines))
+        rows = measure(renderers(path, defines, args.mitsuba, args.builds), ref, args)
+        ptx = ptx_note(path, defines) if not args.builds or "ptx" in args.builds else "not asked"
+        table(name, rows, pixels, rays, ptx)
 
 
 if __name__ == "__main__":
