@@ -216,24 +216,5 @@ def envmap_tables(image: np.ndarray, model: ColorModel = RGB
     cond[row_sums <= 0] = np.linspace(0.0, 1.0, w + 1)
     cond[:, -1] = 1.0
     texels = emission_texels(img.reshape(-1, 3), model)
-    marginal, cond = marginal.astype(np.float32), cond.astype(np.float32)
-    guides = [cdf_guide(marginal), *(cdf_guide(row) for row in cond)]
-    table = np.concatenate([texels.reshape(-1), marginal, cond.reshape(-1), *guides])
+    table = np.concatenate([texels.reshape(-1), marginal, cond.reshape(-1)])
     return np.ascontiguousarray(table, np.float32), (w, h)
-
-
-def guide_size(n: int) -> int:
-    """The slices of [0, 1) of the guide table of a CDF over n cells: the least power of two
-    at least n (a power of two, so that the kernel's u * G is exact)."""
-    return 1 << max(n - 1, 0).bit_length()
-
-
-def cdf_guide(cdf: np.ndarray) -> np.ndarray:
-    """The guide table (Chen and Asau's cutpoint method) of a float32 CDF C[0 .. n]: for
-    g = 0 .. G, the cell the search of stdlib/emitter/envmap.rdsl returns for u = g / G (the
-    first i with C[i + 1] > u, at most n - 1).  Every u of slice g lies in [g / G, (g + 1) / G),
-    so its cell lies between entries g and g + 1, and the kernel searches only there."""
-    n = len(cdf) - 1
-    g = guide_size(n)
-    u = (np.arange(g + 1) / g).astype(np.float32)
-    return np.minimum(np.searchsorted(cdf[1:], u, side="right"), n - 1).astype(np.float32)
