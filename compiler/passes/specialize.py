@@ -89,6 +89,9 @@ PLACEHOLDERS = {
     # whether the BSDF disperses light (stdlib/dispersion.rdsl): optional, see OPTIONAL
     "scene_bsdf_disperses": ("bsdfs", "disperses"),
     "scene_bsdf_leaf_disperses": ("bsdf_leaves", "disperses"),
+    # whether the BSDF has a lobe that emitter sampling can reach (Mitsuba's
+    # BSDFFlags::Smooth): optional, plugins without `smooth()` are taken to have one
+    "scene_bsdf_smooth": ("bsdfs", "smooth"),
     # shading-frame perturbations (normalmap, bumpmap: stdlib/bsdf/perturbed.rdsl) and the
     # texture lookups they make
     "scene_bsdf_normal": ("bsdfs", "normal"),
@@ -96,7 +99,7 @@ PLACEHOLDERS = {
     "scene_texture_eval_1_grad": ("textures", "eval_1_grad"),
 }
 # methods a plugin may lack: its instances then give this constant
-OPTIONAL = {"disperses": False, "normal": 0.0, "eval_3": 0.0, "eval_1_grad": 0.0}
+OPTIONAL = {"disperses": False, "smooth": True, "normal": 0.0, "eval_3": 0.0, "eval_1_grad": 0.0}
 TEXTURE_PLACEHOLDER = "scene_texture_eval"
 TEXTURE_PLACEHOLDER_1 = "scene_texture_eval_1"
 EMITTER_KIND_PLACEHOLDER = "scene_has_emitter_kind"  # folded to the scene's emitter kinds

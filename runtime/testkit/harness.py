@@ -19,7 +19,8 @@ parameters:
   [0][0] of the Mueller matrix in polarized variants; a sample() result then also holds
   ``mueller`` (n, 4, 4) or (n, 4, 4, 4) (row, column, wavelength), and eval() gives it with
   ``mueller=True``;
-* :meth:`Harness.disperses` is the BSDF's ``disperses()`` (false when it has none).
+* :meth:`Harness.disperses` is the BSDF's ``disperses()`` (false when it has none), and
+  :meth:`Harness.smooth` its ``smooth()`` (true when it has none).
 
 The plugin is a stdlib one by name (``Harness("diffuse")``) or any ``.rdsl`` file's
 (:func:`declarations` lists a file's plugins; ``Harness(decl=...)``).  The file is imported
@@ -69,6 +70,7 @@ fn h_disperses(id: Int, ul: Float, T: [Float]) -> Bool {{
     let w = sample_wavelengths(ul);
     return scene_bsdf_disperses(id, T);
 }}
+fn h_smooth(id: Int, ul: Float, T: [Float]) -> Bool {{ return scene_bsdf_smooth(id, T); }}
 """
 _EMITTER = """
 fn h_emitter_eval(id: Int, si: Surface, ul: Float, T: [Float]) -> Spectrum {{
@@ -264,6 +266,10 @@ class Harness:
     def disperses(self, **params: Any) -> bool:
         """Whether the integrator follows the hero wavelength alone after this BSDF."""
         return bool(np.asarray(self._call("h_disperses", 1, [], None, params))[0])
+
+    def smooth(self, **params: Any) -> bool:
+        """Whether the BSDF has a non-delta lobe (the integrators sample emitters there)."""
+        return bool(np.asarray(self._call("h_smooth", 1, [], None, params))[0])
 
     def emitted(self, si: dict, ul: Any = None, **params: Any) -> np.ndarray:
         """An emitter's eval(): the radiance leaving towards si.wi (the intensity)."""
