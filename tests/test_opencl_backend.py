@@ -244,6 +244,26 @@ def test_cornell_box_with_rdsl_bvh():
     assert imgs[REF, "embree"].mean() > 0.05
 
 
+@pytest.mark.skipif(not (ROOT / "stdlib" / "render" / "bvh.rdsl").is_file(),
+                    reason="needs the BVH written in rdsl (stdlib/render/bvh.rdsl)")
+def test_spectral_cornell_box_with_rdsl_bvh():
+    """A spectral render on OpenCL: the LLVM target's image with the same BVH bit for bit,
+    and unbiased against Mitsuba 3's spectral reference (the image means agree within the
+    noise of 16 spp at 32x32: 3%; measured 0.1416 against 0.1443, where rgb gives 0.1500)."""
+    from _scenes import CBOX
+
+    from rdsl.runtime.render.image import read_exr
+
+    imgs = {}
+    for target in ("opencl", REF):
+        s = rdsl.load_scene(CBOX, target=target, accel="bvh", variant="spectral", res=32,
+                            spp=16)
+        imgs[target] = s.render()
+    assert np.array_equal(imgs["opencl"], imgs[REF])
+    ref = read_exr(ROOT / "examples" / "cbox" / "cbox_ref_spectral.exr")[..., :3]
+    np.testing.assert_allclose(imgs["opencl"].mean(), ref.mean(), rtol=0.03)
+
+
 @pytest.mark.parametrize("width", (8, 16))
 def test_gather_of_masked_lanes_reads_nothing(tmp_path: Path, width: int):
     """A gather at indices far outside the buffer in masked-off lanes (the printer's
