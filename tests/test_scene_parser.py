@@ -54,8 +54,8 @@ BAD_SCENES = {
                         "unknown element <camera>; accepted: shape, bsdf"),
     "unknown_shape": (['<shape type="torus"/>'], 2,
                       "unknown shape plugin 'torus'; accepted: rectangle, cube, disk, sphere"),
-    "unknown_bsdf": (['<bsdf type="hair" id="p"/>'], 2,
-                     "unknown bsdf plugin 'hair'; accepted: diffuse, conductor"),
+    "unknown_bsdf": (['<bsdf type="circular" id="p"/>'], 2,
+                     "unknown bsdf plugin 'circular'; accepted: diffuse, conductor"),
     "unknown_emitter": (['<emitter type="sunsky"/>'], 2, "unknown emitter plugin 'sunsky'"),
     "unknown_integrator": (['<integrator type="volpath"/>'], 2,
                            "unknown integrator plugin 'volpath'; accepted: path, direct, aov"),
@@ -216,7 +216,7 @@ def test_error_quotes_line_with_caret(tmp_path: Path) -> None:
         load(path)
     lines = str(exc.value).splitlines()
     assert lines[0] == (f"{path}:2:3: error: unknown shape plugin 'torus'; accepted: rectangle, "
-                        "cube, disk, sphere, cylinder, linearcurve, bsplinecurve, obj, "
+                        "cube, disk, sphere, cylinder, sdfgrid, linearcurve, bsplinecurve, obj, "
                         "ply, serialized, shapegroup, instance, merge")
     assert lines[1].strip() == '<shape type="torus"/>'
     assert lines[2].index("^") == lines[1].index("<")
