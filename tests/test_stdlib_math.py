@@ -314,9 +314,9 @@ def test_docs_math_md_states_the_bounds_the_code_asserts():
     table = rest[:next((i for i, line in enumerate(rest) if not line.startswith("| ")),
                        len(rest))]
     cells = [[c.strip() for c in re.split(r"(?<!\\)\|", line)[1:-1]] for line in table]
-    assert {c[0]: float(c[2]) for c in cells} == UNARY_BOUNDS
+    assert {c[0]: float(c[2]) for c in cells} == BOUNDS
     stdlib = "".join((root / "stdlib" / f).read_text() for f in ("math.rdsl", "special.rdsl"))
-    for name, bound in UNARY_BOUNDS.items():
+    for name, bound in BOUNDS.items():
         if name == "sqrt":
             continue  # a builtin (IEEE), no comment to check
         doc = re.search(r"///([^\n]*\n///)*[^\n]*\n(?:///[^\n]*\n)*fn %s\(" % name, stdlib)
