@@ -69,7 +69,28 @@ def _random_inputs(kernel: dict, n: int, rng: np.random.Generator) -> dict:
                 out[name] = rng.integers(0, 4, n).astype(_NP[d])
         elif a["kind"] == "buffer":
             out[name] = np.zeros(4096, _NP[d])
+    if "n_phi" in out:  # measured_polarized: a valid table, or its lookups leave T
+        kinds = {a["name"]: (a["kind"], _NP[a["dtype"]]) for a in kernel["args"]}
+        for name, v in _pbrdf_table_inputs().items():
+            kind, dtype = kinds.get(name, ("absent", None))
+            if kind in ("uniform", "buffer"):
+                out[name] = v
+            elif kind == "varying":
+                out[name] = np.full(n, v, dtype)
     return out
+
+
+def _pbrdf_table_inputs() -> dict:
+    """The texel buffer and instance values of a synthetic pBRDF table, as the runtime packs
+    them (runtime/render/measured.py), read at 550 nm."""
+    from rdsl.tools.gen_pbrdf import synthetic_pbrdf
+
+    t = synthetic_pbrdf(n_phi=5, n_theta_d=4, n_theta_h=6)
+    grids = [t["phi_d"].ravel(), t["theta_d"].ravel(), t["theta_h"].ravel()]
+    values = np.concatenate([*grids, t["wvls"].astype(np.float32), t["M"].ravel()])
+    return {"T": values.astype(np.float32), "offset": 0, "n_phi": len(grids[0]),
+            "n_td": len(grids[1]), "n_th": len(grids[2]), "n_wl": len(t["wvls"]),
+            "wavelength": 550.0}
 
 
 def _call_raw(lib: ctypes.CDLL, kernel: dict, inputs: dict, n: int) -> list[np.ndarray]:

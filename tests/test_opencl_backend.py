@@ -65,16 +65,7 @@ def test_corpus_matches_interpreter(case, interp_modules, cl_compiled):  # noqa:
     check_case(case, interp_modules[case[0]], cl_compiled)
 
 
-# measured_polarized's `measured_values` takes the table's grid sizes as arguments; this
-# harness passes 0 for integer uniforms and random small ints, so its lookup indexes T out of
-# bounds (undefined on every target): 2 of 999 lanes then differ in some runs. Its kernels
-# are compared with Mitsuba on a real table in tests/test_measured_polarized.py.
-_FLAKY = {"measured_polarized": "random inputs give a zero-size grid: reads outside T"}
-
-
-@pytest.mark.parametrize("path", [
-    pytest.param(p, marks=pytest.mark.xfail(strict=False, reason=_FLAKY[p.stem]))
-    if p.stem in _FLAKY else p for p in STDLIB_BSDFS], ids=lambda p: p.stem)
+@pytest.mark.parametrize("path", STDLIB_BSDFS, ids=lambda p: p.stem)
 def test_stdlib_bsdf_matches_llvm(path: Path):
     """Every kernel of the module, through the flat arguments of its manifest."""
     mod = rdsl.jit(path, target="opencl")
