@@ -80,17 +80,20 @@ def test_hits_match_mitsubas(tmp_path):
 
 PROBE = """
 import render.geometry;
-struct Out { p: Vec3, n: Vec3, s: Vec3, uv: Vec2, dp_du: Vec3, dp_dv: Vec3, valid: Bool }
+struct Out { p: Vec3, n: Vec3, s: Vec3, t: Vec3, wi: Vec3, uv: Vec2, dp_du: Vec3, dp_dv: Vec3,
+             shape: Int, valid: Bool }
 fn probe(o: Vec3, d: Vec3, P: [Float], N: [Float], UV: [Float], F: [Int], G: [Int]) -> Out {
     let ray = Ray { o: o, d: d, tmax: infinity() };
     let h = trace(ray);
     let z = Vec3(0.0, 0.0, 0.0);
     if !h.valid {
-        return Out { p: z, n: z, s: z, uv: Vec2(0.0, 0.0), dp_du: z, dp_dv: z, valid: false };
+        return Out { p: z, n: z, s: z, t: z, wi: z, uv: Vec2(0.0, 0.0), dp_du: z, dp_dv: z,
+                     shape: -1, valid: false };
     }
     let it = interaction(ray, h, P, N, UV, F, G);
-    return Out { p: it.si.p, n: it.frame.n, s: it.frame.s, uv: it.si.uv, dp_du: it.dp_du,
-                 dp_dv: it.dp_dv, valid: true };
+    return Out { p: it.si.p, n: it.frame.n, s: it.frame.s, t: it.frame.t, wi: it.si.wi,
+                 uv: it.si.uv, dp_du: it.dp_du, dp_dv: it.dp_dv, shape: it.shape,
+                 valid: true };
 }
 """
 

@@ -14,12 +14,11 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
-import pytest
 import rdsl
 from _bsdf_harness import SceneBsdfs
 from _mitsuba_render import mitsuba_variant
 from _plugin_scenes import median_rmse, perspective, write_scene
-from test_curves import BSPLINE, LINEAR, MOVED
+from test_curves import BSPLINE, LINEAR, MOVED, PROBE
 from test_principled import _surfaces
 
 f32 = np.float32
@@ -30,20 +29,6 @@ LIGHT_HAIR = ('<bsdf type="hair"><float name="eumelanin" value="0.2"/>'
 RED_HAIR = ('<bsdf type="hair"><rgb name="sigma_a" value="0.1, 0.5, 0.9"/>'
             '<float name="azimuthal_roughness" value="0.5"/><float name="int_ior" value="1.5"/>'
             '</bsdf>')
-
-PROBE = """
-import render.geometry;
-struct Out { p: Vec3, n: Vec3, s: Vec3, t: Vec3, wi: Vec3, shape: Int, valid: Bool }
-fn probe(o: Vec3, d: Vec3, P: [Float], N: [Float], UV: [Float], F: [Int], G: [Int]) -> Out {
-    let ray = Ray { o: o, d: d, tmax: infinity() };
-    let h = trace(ray);
-    let z = Vec3(0.0, 0.0, 0.0);
-    if !h.valid { return Out { p: z, n: z, s: z, t: z, wi: z, shape: -1, valid: false }; }
-    let it = interaction(ray, h, P, N, UV, F, G);
-    return Out { p: it.si.p, n: it.frame.n, s: it.frame.s, t: it.frame.t, wi: it.si.wi, shape: it.shape,
-                 valid: true };
-}
-"""
 
 
 def _curves_scene(folder: Path, linear_bsdf: str, bspline_bsdf: str) -> Path:

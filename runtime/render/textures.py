@@ -12,6 +12,8 @@ which its ``eval_1`` reads (Mitsuba's single-channel lookup: their luminance; a 
 colours give the one value of Mitsuba's ``srgb`` texture, ``srgb_eval_1``), and one that
 sets emitted light (an area emitter's ``radiance``) another, whose lookups are emitted
 colours (``illuminant``: times D65 in spectral builds, as Mitsuba's ``texture_d65``).
+A ``volume`` texture's voxels are stored as a bitmap's texels, x fastest, then y, then z
+(runtime/scene/volumes.py reads them; ``stdlib/texture/volume.rdsl`` looks them up).
 Lookups, filtering and wrapping happen in rdsl (``stdlib/texture/bitmap.rdsl``); Python only
 decodes the images, as Mitsuba does when it loads them: 8-bit (and 16-bit) PNG and JPEG
 images are sRGB-encoded and are linearized unless ``raw`` is set, EXR images are linear.
@@ -31,6 +33,7 @@ from ...core.spectral import srgb_model_mean
 from ..plugins import stdlib_names
 from ..scene.mesh_attributes import attribute_textures
 from ..scene.reads import memoized
+from ..scene.volumes import volume_grid
 from .colors import encode_texels, spectrum_value
 from .declared import declared_instance, needs_eval_1
 
@@ -109,6 +112,7 @@ class TextureTable:
         self._count = 0
         self._attributes: list[tuple[Instance, Any, str]] = []  # mesh_attribute instances
         self._tables: dict[Any, int] = {}  # key -> index in T of a BSDF's table (floats())
+        self._volumes: dict[tuple[int, str], int] = {}  # (id(volume), usage) -> offset
 
     def fill_attributes(self, meshes: list[tuple[int, Any, Any]]) -> None:
         """Store the values of the mesh_attribute textures for ``meshes``, (first triangle,
@@ -181,6 +185,11 @@ class TextureTable:
                                           "face": p["name"].startswith("face_")}, name)
             self._attributes.append((inst, plugin, usage))
             return inst
+        if plugin.type == "volume":
+            if emitted:
+                raise CompileError(f"{what}: a volume texture cannot set emitted light yet",
+                                   plugin.loc)
+            return Instance(plugin.type, self._volume(plugin, usage), name)
         if plugin.type not in ("bitmap", "checkerboard"):
             raise CompileError(f"{what}: texture `{plugin.type}` is not supported by the "
                                f"renderer yet (supported: {', '.join(stdlib_names('texture'))})",
@@ -204,6 +213,28 @@ class TextureTable:
                           filter=BITMAP_FILTERS[p["filter_type"]],
                           wrap=BITMAP_WRAPS[p["wrap_mode"]], emitted=emitted, scale=scale)
         return Instance(plugin.type, params, name)
+
+    def _volume(self, plugin: Any, usage: str) -> dict[str, Any]:
+        """A volume texture's params, its voxels stored (once per volume and usage)."""
+        vol = plugin.children[0]
+        grid, to_world = volume_grid(vol)
+        key = (id(vol), usage)
+        if key not in self._volumes:
+            self._volumes[key] = self._count
+            self._texels.append((grid.reshape(-1), usage != "scalar"))
+            self._count += grid.shape[0] * grid.shape[1] * grid.shape[2]
+        rows = np.linalg.inv(to_world)[:3]
+        p = vol.params
+        nearest = vol.type == "gridvolume" and p["filter_type"] == "nearest"
+        mean = tuple(float(x) for x in grid.reshape(-1, 3).mean(axis=0))
+        return {"offset": self._volumes[key], "nx": grid.shape[2], "ny": grid.shape[1],
+                "nz": grid.shape[0], "filter": BITMAP_FILTERS["nearest" if nearest else
+                                                             "bilinear"],
+                "wrap": BITMAP_WRAPS[p["wrap_mode"] if vol.type == "gridvolume" else "clamp"],
+                **{f"r{i}": tuple(float(x) for x in rows[i]) for i in range(3)},
+                "average": SpectrumValue(mean, None, False),
+                "constant": vol.type == "constvolume", "rgb": mean,
+                "spectral_mean": float(srgb_model_mean(mean))}
 
     def _image(self, filename: str, raw: bool, plugin: Any, usage: str
                ) -> tuple[int, int, int, tuple[float, float, float], float]:

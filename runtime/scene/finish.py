@@ -8,8 +8,9 @@ collected; it uses the builder's ``what``, ``file`` and ``default``.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -27,6 +28,7 @@ from .samplers import finish_sampler
 from .schema import AOV_TYPES, BITMAP_FORMATS
 from .sensors import METERS, finish_sensor
 from .spectra import Color, conductor_ior
+from .volumes import load_volume_grid
 from .xml import ObjectNode
 
 if TYPE_CHECKING:
@@ -100,6 +102,9 @@ class Finishers:
 
     def finish_texture(self, obj: Plugin, node: ObjectNode, objects: dict) -> None:
         p = obj.params
+        if obj.type == "volume" and obj.decl is None:
+            obj.children = [v for v, _ in objects["volume"]]
+            return
         if obj.type == "mesh_attribute" and obj.decl is None:
             if not p["name"].startswith(PREFIXES) or p["name"] in PREFIXES:
                 raise scene_error(f"mesh_attribute: 'name' is '{p['name']}'; an attribute is "
@@ -116,6 +121,30 @@ class Finishers:
                                   f"is not supported; accepted: {', '.join(BITMAP_FORMATS)}",
                                   _loc(node, "filename"))
             p["filename"] = str(path)
+
+    def grid_file(self, node: ObjectNode, p: dict, load: Callable[[Path], Any]) -> Any:
+        """``load(path)`` of the grid file ``filename`` (an sdfgrid's, a gridvolume's), which
+        becomes its path; or an error naming the file and why, at the XML's ``filename``."""
+        path = self.file(node, "filename", "grid")
+        try:
+            out = load(path)
+        except (ValueError, OSError) as e:
+            why = e.strerror if isinstance(e, OSError) and e.strerror else str(e)
+            raise scene_error(f"{self.what(node)}: cannot load grid file "
+                              f"'{p['filename']}' ({path}): {why}",
+                              _loc(node, "filename")) from None
+        p["filename"] = str(path)
+        return out
+
+    def finish_volume(self, obj: Plugin, node: ObjectNode, objects: dict) -> None:
+        p = obj.params
+        if p["to_world"] is None:
+            p["to_world"] = xf.identity()
+        if obj.type == "gridvolume":
+            self.grid_file(node, p, load_volume_grid)
+        elif getattr(p["value"], "rgb", None) is None:
+            raise scene_error("constvolume: 'value' must be a float, rgb or spectrum",
+                              _loc(node, "value"))
 
     def finish_emitter(self, obj: Plugin, node: ObjectNode, objects: dict) -> None:
         p = obj.params

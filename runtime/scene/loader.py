@@ -141,7 +141,8 @@ class _Builder(ShapeFinisher, Finishers):
                 samplers.append(self.instantiate(ch.node))
                 continue
             if cat not in SCENE_CHILDREN:
-                where = "<film>" if cat == "rfilter" else "<sensor>"
+                where = {"rfilter": "<film>", "volume": '<texture type="volume">'}.get(
+                    cat, "<sensor>")
                 raise scene_error(f"<{cat}> cannot appear directly inside <scene>; nest it "
                                   f"inside {where}", ch.loc)
             obj = self.instantiate(ch.node)

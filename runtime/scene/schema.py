@@ -230,6 +230,16 @@ _SPECS = [
     # a PLY mesh's per-vertex or per-face attribute (runtime/scene/mesh_attributes.py)
     PluginSpec("texture", "mesh_attribute", {"name": P("string", REQUIRED),
                                              "scale": P("float", 1.0)}),
+    # a 3-D texture: its nested volume at the point, in the volume's frame (the unit cube)
+    PluginSpec("texture", "volume", {}, {"volume": (1, 1)}),
+    # volumes (only as a `volume` texture's: rdsl has no participating media)
+    PluginSpec("volume", "gridvolume", {
+        "filename": P("string", REQUIRED), "to_world": P("transform"),
+        "filter_type": P("string", "trilinear", ("trilinear", "nearest")),
+        "wrap_mode": P("string", "clamp", ("repeat", "mirror", "clamp")),
+        "raw": P("boolean", False), "use_grid_bbox": P("boolean", False)}),
+    PluginSpec("volume", "constvolume", {"value": P("spectrum", 1.0),
+                                         "to_world": P("transform")}),
     # emitters
     PluginSpec("emitter", "area", {"radiance": P("color", 1.0)}),
     PluginSpec("emitter", "point", {"intensity": P("color", 1.0), "position": P("point"),

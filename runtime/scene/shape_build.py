@@ -82,15 +82,8 @@ class ShapeFinisher:
 
     def sdfgrid(self, node: ObjectNode, m: np.ndarray, p: dict) -> Analytic:
         """An sdfgrid's samples, from its ``filename``, checked."""
-        path = self.file(node, "filename", "grid")
-        try:
-            grid = memoized(path, ("sdfgrid",), lambda: load_grid(path))
-        except (ValueError, OSError) as e:
-            why = e.strerror if isinstance(e, OSError) and e.strerror else str(e)
-            raise scene_error(f"{self.what(node)}: cannot load grid file "
-                              f"'{p['filename']}' ({path}): {why}",
-                              _loc(node, "filename")) from None
-        p["filename"] = str(path)
+        grid = self.grid_file(node, p, lambda path: memoized(path, ("sdfgrid",),
+                                                             lambda: load_grid(path)))
         return Analytic("sdfgrid", m, False, grid=grid, smooth=p["normals"] == "smooth")
 
     def finish_shape(self, obj: Shape, node: ObjectNode, objects: dict) -> None:

@@ -45,11 +45,11 @@ from .spectra import (
 )
 
 OBJECT_TAGS = ("shape", "bsdf", "texture", "emitter", "integrator", "sensor", "film",
-               "sampler", "rfilter")
+               "sampler", "rfilter", "volume")
 PROPERTY_TAGS = ("float", "integer", "boolean", "string", "rgb", "spectrum", "point", "vector",
                  "transform")
 OTHER_TAGS = ("ref", "include", "default", "path")
-UNSUPPORTED_OBJECTS = ("medium", "phase", "volume")
+UNSUPPORTED_OBJECTS = ("medium", "phase")
 TRANSFORM_OPS = {
     "translate": ("x", "y", "z", "value"),
     "rotate": ("x", "y", "z", "angle", "value"),
