@@ -11,8 +11,9 @@ Mueller matrix at each of the four wavelengths in spectral_polarized, entry [0][
 unpolarized variants (spectral per wavelength; mono and rgb at the fixed `wavelength`, which
 both require there), also where the table has invalid (NaN) entries.  Then pdf() and
 sample() against Mitsuba's pdf and eval / pdf, a scene seen through a polarizer against
-Mitsuba's image, and bad input (missing file, not a tensor file, wrong fields, shapes and
-types, no wavelength in rgb) as errors naming the file and the XML line."""
+Mitsuba's image, the test kit's checks in every variant (on a reciprocal table), and bad
+input (missing file, not a tensor file, wrong fields, shapes and types, no wavelength in
+rgb) as errors naming the file and the XML line."""
 
 from __future__ import annotations
 
@@ -397,3 +398,26 @@ def test_stokes_render_matches_mitsuba(pbrdf, tmp_path: Path):
         ours, theirs = blocks(img[..., names.index(f"S{i}.R")]), blocks(ref[..., 3 + 3 * i])
         assert np.abs(theirs).mean() > 3 * tol, (i, theirs)
         np.testing.assert_allclose(ours, theirs, atol=tol, err_msg=f"S{i}")
+
+
+@pytest.mark.parametrize("variant", ["mono", "rgb", "spectral", "mono_polarized",
+                                     "spectral_polarized"])
+def test_passes_the_test_kit(tmp_path: Path, variant: str):
+    """The test kit's checks (`rdsl test-plugin`) in every variant on a reciprocal table:
+    chi-square of sample() against pdf(), weight == eval / pdf, pdf == pdf(), reciprocity,
+    the albedo at most 1, finite values at grazing angles and extreme parameters.  The same
+    checks on the table whose diffuse term tells phi_d from phi_d + pi must fail
+    reciprocity (the check sees the plugin's wi/wo roles)."""
+    from rdsl.runtime.testkit.bsdf_checks import check_bsdf
+    from rdsl.runtime.testkit.common import Options
+    from rdsl.runtime.testkit.report import PASS, table
+
+    for reciprocal in (True, False):
+        h, params = _harness(variant, write(tmp_path / f"{reciprocal}.pbsdf",
+                                            reciprocal=reciprocal))
+        if "spectral" not in variant:
+            params["wavelength"] = 550.0
+        rows = check_bsdf(h, Options(samples=50_000, params=params))
+        failed = {r.check for r in rows if r.failed}
+        assert failed == (set() if reciprocal else {"reciprocity"}), table(rows)
+    assert sum(r.check == "chi2 sample vs pdf" and r.status == PASS for r in rows) == 3

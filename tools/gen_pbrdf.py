@@ -45,10 +45,12 @@ def _fresnel_mueller(cos_i: np.ndarray, eta: complex) -> np.ndarray:
 
 
 def synthetic_pbrdf(n_phi: int = 13, n_theta_d: int = 10, n_theta_h: int = 12,
-                    alpha: float = 0.25, nan_above: float | None = None
-                    ) -> dict[str, np.ndarray]:
+                    alpha: float = 0.25, nan_above: float | None = None,
+                    reciprocal: bool = False) -> dict[str, np.ndarray]:
     """The fields of a pBRDF tensor file (``phi_d``, ``theta_d``, ``theta_h``, ``wvls``,
-    ``M``), ``nan_above`` (degrees of theta_d) marking larger angles invalid."""
+    ``M``), ``nan_above`` (degrees of theta_d) marking larger angles invalid.  Swapping wi
+    and wo turns phi_d by pi: the diffuse term varies as cos(phi_d), which tells the two
+    apart, unless ``reciprocal`` (cos(2 phi_d): M[0][0] symmetric, as a physical pBRDF's)."""
     phi = np.linspace(-np.pi, np.pi, n_phi)
     td = np.linspace(0.0, np.pi / 2, n_theta_d)
     th = np.pi / 2 * np.linspace(0.0, 1.0, n_theta_h) ** 2
@@ -60,7 +62,8 @@ def synthetic_pbrdf(n_phi: int = 13, n_theta_d: int = 10, n_theta_h: int = 12,
     c2 = np.cos(TH) ** 2
     d = a2 / (np.pi * (c2 * (a2 - 1) + 1) ** 2)  # GGX
     spec = _fresnel_mueller(np.cos(TD), eta) * (d / 4)[..., None, None]
-    rho = (0.25 + 0.1 * x) * (1 + 0.3 * np.cos(P)) * np.cos(TD) ** 0.5 / np.pi
+    lobe = np.cos(2 * P if reciprocal else P)
+    rho = (0.25 + 0.1 * x) * (1 + 0.3 * lobe) * np.cos(TD) ** 0.5 / np.pi
     m = spec.copy()
     m[..., 0, 0] += rho
     # small smooth entries where the Fresnel matrix has zeros
