@@ -163,8 +163,8 @@ def backward(scene: Scene, d_img: Any, params: list[str], spp: int | None = None
                    parts.rows(j.size, scene.buffers.T.size) if parts.texels else
                    np.zeros(j.size, np.int32), "ad_row_tape": parts.rows(j.size, floats)} | seeds
         head = [rs, *scene.buffers.args(), prm]
-        rest = [(uniform[x], False) if x in uniform else
-                (varying.get(x, np.zeros(j.size, np.float32)), True)
+        zero = np.zeros(j.size, np.float32)  # every adjoint seed that is 0 (read only)
+        rest = [(uniform[x], False) if x in uniform else (varying.get(x, zero), True)
                 for x in names[names.index("PRM") + 1:]]
         parts.run(partial(_adjoint_part, mod["render_sample"], j, head, rest), j.size)
     return {name: parts.gradient(c) for name, c in chosen.items()}
