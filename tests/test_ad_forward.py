@@ -128,8 +128,9 @@ def test_params_and_render_forward_mistakes():
     with pytest.raises(ValueError, match="tangent of `red.reflectance` has 3"):
         scene.render_forward("red.reflectance", tangent=[1.0, 0.0])
     spectral = rdsl.load_scene(CBOX, variant="spectral", res=8, spp=1)
-    with pytest.raises(CompileError, match="spectral variants are not supported yet"):
-        spectral.render_forward("red.reflectance")
+    assert spectral.params["red.reflectance"].shape == (4,)
+    with pytest.raises(ValueError, match="holds 4 value.*coefficients and a scale"):
+        spectral.params["red.reflectance"] = [0.1, 0.2, 0.3]
 
 
 @needs_cbox

@@ -43,10 +43,6 @@ __all__ = ["backward"]
 
 def _check(scene: Scene, d_img: Any, params: list[str]) -> tuple[np.ndarray, dict]:
     """``d_img`` as float64 and the slots of ``params``, or a clear error."""
-    if scene.build.model.spectral:
-        raise CompileError("reverse-mode gradients in the spectral variants are not "
-                           "supported yet (colours are stored as upsampling coefficients); "
-                           "render in `rgb` or `mono`")
     if isinstance(params, str):
         params = [params]
     slots = scene.params.slots

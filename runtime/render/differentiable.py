@@ -20,8 +20,12 @@ accumulates ``derivative(value)`` as extra channels.  The derivative is that of 
 Monte Carlo estimate (same seed): it ignores the discontinuities of visibility, as
 Mitsuba 3 does without reparameterization.
 
-Colours are stored as RGB in the ``mono`` and ``rgb`` variants; the spectral variants store
-upsampling coefficients, whose derivatives are not offered yet (a clear error).
+Colours are stored as RGB in the ``mono`` and ``rgb`` variants.  The spectral variants store
+a colour as what the kernel reads: three sigmoid-polynomial coefficients (Jakob & Hanika,
+whose spectrum is ``sigmoid(c0 l^2 + c1 l + c2)`` at wavelength ``l`` in nm) and a scale, so
+a colour parameter there holds those 4 values and its derivatives are with respect to them,
+as Mitsuba 3's spectral ``value`` holds the coefficients.  Bitmap texels are parameters in
+``mono`` and ``rgb`` only (the spectral variants store coefficients per texel).
 """
 
 from __future__ import annotations
@@ -105,8 +109,6 @@ class SceneParams(MutableMapping):
         spec = scene.scene_spec_for_params()
         generic, self.values = parameter_slots(spec, scene.build.model)
         self.slots = param_slots(generic)
-        if scene.build.model.spectral:
-            self.slots = {k: s for k, s in self.slots.items() if s.size == 1}
         self.texels = texel_params(scene.buffers.textures, scene.build.model)
         self.slots.update(self.texels)  # for _lookup's names; read and set below
 
@@ -126,7 +128,10 @@ class SceneParams(MutableMapping):
             return
         v = np.asarray(value, np.float32).reshape(-1)
         if v.size not in (1, slot.size):
-            raise ValueError(f"`{name}` holds {slot.size} value(s); got an array of {v.size}")
+            hint = " (a colour in the spectral variants: 3 sigmoid-polynomial coefficients " \
+                "and a scale)" if self.scene.build.model.spectral and slot.size == 4 else ""
+            raise ValueError(f"`{name}` holds {slot.size} value(s){hint}; got an array of "
+                             f"{v.size}")
         self.scene.use_generic()
         _check_tables(self.scene, name)
         self.scene.prm[slot.offset:slot.offset + slot.size] = v
@@ -200,10 +205,6 @@ def render_forward(scene: Scene, name: str, spp: int | None = None, seed: int | 
                    tangent: Any = None, threads: int | None = None
                    ) -> tuple[np.ndarray, np.ndarray]:
     """The image and its derivative with respect to parameter ``name`` along ``tangent``."""
-    if scene.build.model.spectral:
-        raise CompileError("forward derivatives in the spectral variants are not supported "
-                           "yet (colours are stored as upsampling coefficients); render in "
-                           "`rgb` or `mono`")
     params = scene.params  # validates the name before anything compiles
     key, slot = _lookup(params.slots, name)
     if key in params.texels:
