@@ -1,7 +1,8 @@
 """A zero adjoint through an infinite local partial (inf * 0 = NaN) must contribute 0:
 the side of a ``select`` or an ``if`` not taken (``sqrt`` at 0, a division by 0, ``pow``
 at 0) has an infinite partial where its adjoint is 0.  Checked against analytic values,
-forward mode, and central differences of roughplastic.eval's d/d alpha (which was NaN in
+forward mode (whose zero tangents are guarded the same way), and central differences of
+roughplastic.eval's d/d alpha (which was NaN in
 every lane without elimination), with and without graph elimination, which composes the
 guarded partials (a zero adjoint or a zero partial upstream stays 0) and must store no more
 than it does with the guards left out."""
@@ -75,6 +76,20 @@ def test_zero_partial_upstream_of_an_infinite_one(builds):
     want_x = np.where(c != 0, c * 0.5 / np.sqrt(safe), 0.0)
     np.testing.assert_allclose(gx, a * want_x, rtol=1e-5)
     np.testing.assert_allclose(gc, a * np.sqrt(x), rtol=1e-5)
+
+
+def test_zero_tangent_through_an_infinite_partial(builds):
+    """Forward mode along c of c * sqrt(x) at x = 0: x has tangent 0 there, so sqrt's
+    infinite partial carries nothing (the derivative is sqrt(0) = 0, not NaN)."""
+    x = np.array([0.0, 0.0, 0.25, 4.0], np.float32)
+    c = np.array([0.0, 3.0, 2.0, 1.0], np.float32)
+    zero, one = np.zeros_like(x), np.ones_like(x)
+    y, d_c = builds[1].scaled(x, c, zero, one)
+    np.testing.assert_allclose(d_c, np.sqrt(x), rtol=1e-6)
+    _, d_x = builds[1].scaled(x, c, one, zero)  # along x: infinite where c != 0 at x = 0
+    safe = np.maximum(x.astype(np.float64), 1e-30)
+    np.testing.assert_allclose(d_x[2:], c[2:] * 0.5 / np.sqrt(safe[2:]), rtol=1e-5)
+    assert d_x[0] == 0.0 and np.isinf(d_x[1])
 
 
 @pytest.mark.parametrize("name", ["roughconductor", "roughplastic", "principled"])

@@ -227,7 +227,7 @@ class _Forward:
             n = (len(ins.operands) - 1) // 2
             xs, y, ps = ins.operands[:n], ins.operands[n], ins.operands[n + 1:]
             self.renamed[ins.result] = y
-            terms = [b.op(Op.MUL, F32, p, self.tangent[x]) for x, p in zip(xs, ps)
+            terms = [_product(b, p, self.tangent[x]) for x, p in zip(xs, ps)
                      if self.tangent.get(x) is not None]
             self._sum(y, terms, b)
             return
@@ -258,12 +258,12 @@ class _Forward:
         if op in _LINEAR:
             self.tangent[y] = b.op(op, F32, *d)
         elif op is Op.MUL:
-            self._sum(y, [b.op(Op.MUL, F32, ops[1 - i], t) for i, t in enumerate(ds)
+            self._sum(y, [_product(b, ops[1 - i], t) for i, t in enumerate(ds)
                           if t is not None], b)
         elif op is Op.DIV:  # (da - y db) / b
-            num = d[0] if ds[1] is None else b.op(Op.SUB, F32, d[0],
-                                                   b.op(Op.MUL, F32, y, ds[1]))
-            self.tangent[y] = b.op(Op.DIV, F32, num, ops[1])
+            num = d[0] if ds[1] is None else b.op(Op.SUB, F32, d[0], _guarded(
+                b, ds[1], b.op(Op.MUL, F32, y, ds[1])))
+            self.tangent[y] = _guarded(b, num, b.op(Op.DIV, F32, num, ops[1]))
         elif op is Op.SQRT:  # da / (2 y), 0 at y = 0
             q = b.op(Op.DIV, F32, d[0], b.op(Op.ADD, F32, y, y))
             self.tangent[y] = b.op(Op.SELECT, F32, b.op(Op.GT, BOOL, y, zero), q, zero)
@@ -275,6 +275,25 @@ class _Forward:
             self.tangent[y] = b.op(Op.SELECT, F32, first, d[0], d[1])
         elif op is Op.SELECT:
             self.tangent[y] = b.op(Op.SELECT, F32, ops[0], d[1], d[2])
+
+
+def _guarded(b: Builder, t: Value, p: Value) -> Value:
+    """``p`` (a product of the tangent ``t`` and a local partial), 0 where ``t`` is 0: a zero
+    tangent carries nothing even through an infinite partial (``sqrt``, a division or a
+    rule's partial at a point where it is infinite, as ``c * sqrt(x)`` at x = 0 along c), as
+    inf * 0 = NaN would otherwise poison every tangent downstream (ad_reverse's
+    ``zero_guard`` is the adjoint's)."""
+    zero = b.const(0.0, F32)
+    return b.op(Op.SELECT, F32, b.op(Op.EQ, BOOL, t, zero), zero, p)
+
+
+def _product(b: Builder, p: Value, t: Value) -> Value:
+    """The term ``p * t`` of a tangent (a local partial or factor ``p``, a tangent ``t``),
+    0 where either is 0: an infinite tangent through a zero factor carries nothing, as the
+    adjoint of a product with a zero factor is 0 (``d/dx (c sqrt(x))`` at c = 0, x = 0)."""
+    zero = b.const(0.0, F32)
+    either = b.op(Op.OR, BOOL, b.op(Op.EQ, BOOL, t, zero), b.op(Op.EQ, BOOL, p, zero))
+    return b.op(Op.SELECT, F32, either, zero, b.op(Op.MUL, F32, p, t))
 
 
 def _new_result(ins: Instr) -> Value:
