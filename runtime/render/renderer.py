@@ -93,7 +93,7 @@ class Scene:
                  triangulate: bool = False, plugins: Any = (), accel: str | None = None,
                  **defaults: Any) -> None:
         if accel is None:  # Embree runs on the CPU; other devices trace through the rdsl BVH
-            accel = "embree" if build.target.backend in ("llvm", "c") else "bvh"
+            accel = "embree" if build.target.backend == "llvm" else "bvh"
         if accel not in ACCELS:
             raise CompileError(f"unknown accel `{accel}` (valid: {', '.join(ACCELS)})")
         self.path = Path(path)
