@@ -43,9 +43,9 @@ def add_commands(sub: argparse._SubParsersAction) -> dict[str, Callable[[Any], i
     r.add_argument("--triangulate", action="store_true",
                    help="render spheres and disks as triangle meshes, not analytic shapes")
     r.add_argument("--accel", choices=("embree", "bvh"), default=None,
-                   help="trace rays with Embree (the default on CPU targets) or with the BVH "
-                        "written in rdsl (stdlib/render/bvh.rdsl; the default on opencl, "
-                        "spirv and ptx)")
+                   help="trace rays with Embree (the default on the LLVM CPU targets) or with "
+                        "the BVH written in rdsl (stdlib/render/bvh.rdsl; the default on c, "
+                        "opencl, spirv and ptx)")
     r.add_argument("--plugins", action="append", default=[], metavar="DIR",
                    help="a folder (or .rdsl file) of BSDF, texture and emitter plugins, "
                         "searched after the scene's folder (repeatable; also "

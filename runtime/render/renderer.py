@@ -436,8 +436,8 @@ def load_scene(path: str | Path, variant: str | ColorModel = "rgb",
     before the scene is read.  ``plugins``: folders (or ``.rdsl`` files) searched for the
     scene's BSDF, texture and emitter plugins after the scene's own folder and before
     ``$RDSL_PLUGIN_PATH``, the registered plugins and the stdlib (docs/plugins.md).
-    ``accel``: "embree" (the default on CPU targets) traces rays with Embree, "bvh" (the
-    default on opencl, spirv and ptx) with the BVH written in rdsl (stdlib/render/bvh.rdsl,
+    ``accel``: "embree" (the default on the LLVM CPU targets) traces rays with Embree, "bvh"
+    (the default on c, opencl, spirv and ptx) with the BVH written in rdsl (stdlib/render/bvh.rdsl,
     built by runtime/render/bvh.py)."""
     build = build or Build.of(target, variant)
     return Scene(path, build, specialize=specialize, triangulate=triangulate,
