@@ -95,7 +95,7 @@ class Binary:
 
     name: str
     truth: Callable[[np.ndarray, np.ndarray], np.ndarray]
-    normal_only: bool  # the bound holds where the rounded truth is normal, inf or NaN
+    normal_only: bool  # the bound holds where the rounded truth is normal (else: finite)
     bound: float  # documented max error (ulp) there
     domain: str
 
