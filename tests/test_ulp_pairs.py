@@ -108,3 +108,17 @@ def test_a_wrong_special_value_is_counted():
     r = bench.sweep2(lambda a, b: np.minimum(np.power(a.astype(np.float64), b), 3e38).astype(
         np.float32), pow_, [(x, y)])
     assert r["special"] == 1  # 10^40 rounds to inf in float32: FLT_MAX is wrong
+
+
+@pytest.mark.parametrize("target", ["scalar", "host"])
+def test_float_remainder_is_exact(target):
+    """The stdlib's other two-argument float function, ``x % y``, is C's fmodf (exact, so no
+    ulp bound to sweep): bit for bit over the exponent grid and the special pairs."""
+    kernel = rdsl.jit("fn k_rem(x: Float, y: Float) -> Float { return x % y; }",
+                      target=target)["k_rem"]
+    for name in ("grid", "special"):
+        x, y = _all(SETS[name], "atan2", 1 << 18)
+        with np.errstate(all="ignore"):
+            got, ref = kernel(x, y), np.fmod(x, y)
+        same = (got.view(np.uint32) == ref.view(np.uint32)) | (np.isnan(got) & np.isnan(ref))
+        assert same.all(), (x[~same][:3], y[~same][:3], got[~same][:3])
