@@ -85,3 +85,28 @@ void ulp_stats(const float *x, const float *got, const double *ref, int64_t n, i
     }
     out[0] = worst; out[1] = at; out[2] = total; out[3] = count; out[4] = bad;
 }
+
+/* Two arguments: fn 0 is pow(x, y), 1 is atan2(x, y) (x the first argument, as in C).
+   The max and mean are over the pairs whose rounded truth is finite (and normal, with
+   normal_only). Special values (a truth that is NaN or zero, or rounds to an infinity) must
+   come out exactly, the sign of a zero included.
+   out: max error, its x, its y, sum of finite errors, count, special mismatches */
+void ulp_stats2(const float *x, const float *y, const float *got, int64_t n, int fn,
+                int normal_only, double *out) {
+    double worst = 0.0, wx = 0.0, wy = 0.0, total = 0.0, count = 0.0, bad = 0.0;
+    for (int64_t i = 0; i < n; i++) {
+        double a = (double)x[i], b = (double)y[i];
+        double r = fn == 0 ? pow(a, b) : atan2(a, b);
+        double g = (double)got[i];
+        float r32 = (float)r;
+        if (isfinite(r32) && (!normal_only || fabs(r32) >= 1.1754943508222875e-38)) {
+            double e = ulp_error(g, r);
+            if (e > worst) { worst = e; wx = a; wy = b; }
+            if (isfinite(e)) total += e;
+            count += 1.0;
+        }
+        if (!isfinite(r32) || r == 0.0)
+            bad += !((isnan(g) && isnan(r)) || (g == r32 && signbit(g) == signbit(r)));
+    }
+    out[0] = worst; out[1] = wx; out[2] = wy; out[3] = total; out[4] = count; out[5] = bad;
+}

@@ -87,12 +87,33 @@ UNARY = [
     Unary("erf", _erf, -F32_MAX, F32_MAX, 1.0),
     Unary("erfinv", _erfinv, -1.0, 1.0, 1.0),
 ]
-BOUNDS = {u.name: u.bound for u in UNARY}
+
+
+@dataclass(frozen=True)
+class Binary:
+    """A stdlib function of two Floats, its float64 truth and where its bound holds."""
+
+    name: str
+    truth: Callable[[np.ndarray, np.ndarray], np.ndarray]
+    normal_only: bool  # the bound holds where the rounded truth is normal (else: finite)
+    bound: float  # documented max error (ulp) there
+    domain: str
+
+
+BINARY = [
+    Binary("pow", np.power, True, 1.0, "normal results"),
+    Binary("atan2", np.arctan2, False, 1.0, "all floats"),
+]
+BOUNDS = {f.name: f.bound for f in [*UNARY, *BINARY]}
 
 
 def wrappers(names: list[str]) -> str:
-    """An rdsl program with one kernel ``k_NAME(x) -> Float`` per function."""
-    return "\n".join(f"fn k_{n}(x: Float) -> Float {{ return {n}(x); }}" for n in names)
+    """An rdsl program with one kernel ``k_NAME(x) -> Float`` (``k_NAME(x, y)`` for the
+    functions of :data:`BINARY`) per function."""
+    two = {b.name for b in BINARY}
+    return "\n".join(f"fn k_{n}(x: Float, y: Float) -> Float {{ return {n}(x, y); }}"
+                     if n in two else f"fn k_{n}(x: Float) -> Float {{ return {n}(x); }}"
+                     for n in names)
 
 
 def float32_chunk(start: int, count: int) -> np.ndarray:
