@@ -287,7 +287,7 @@ def test_vector_helpers(mod):
 
 def test_reflect_refract(mod):
     n = 2000
-    wi = RNG.normal(size=(n, 3))
+    wi = np.random.default_rng(288).normal(size=(n, 3))  # its own: xdist runs any order
     wi[:, 2] = np.abs(wi[:, 2])
     wi = (wi / np.linalg.norm(wi, axis=1, keepdims=True)).astype(np.float32)
     nz = np.tile(np.array([0, 0, 1], np.float32), (n, 1))
@@ -297,7 +297,8 @@ def test_reflect_refract(mod):
         out = mod["k_refract"](wi, nz, np.full(n, eta, np.float32))
         wt, ok = out[:, :3].astype(np.float64), out[:, 3] == 1
         sin_i = np.linalg.norm(wi[:, :2], axis=1)
-        assert np.array_equal(ok, sin_i / eta < 1)
+        clear = np.abs(sin_i / eta - 1) > 1e-6  # float32 decides the exact boundary
+        assert np.array_equal(ok[clear], (sin_i / eta < 1)[clear])
         np.testing.assert_allclose(np.linalg.norm(wt[ok], axis=1), 1, atol=1e-5)
         # Snell's law, and the refracted ray continues through the surface
         np.testing.assert_allclose(np.linalg.norm(wt[ok, :2], axis=1) * eta, sin_i[ok],
