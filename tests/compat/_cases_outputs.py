@@ -7,9 +7,9 @@ scene (the AOVs of one render) are rendered once (_sheet.measure)."""
 
 from __future__ import annotations
 
-from _cases import CONDUCTOR, DIELECTRIC, DIFFUSE, ROUGHCONDUCTOR, ROUGHPLASTIC, bitmap, bsdf
+from _cases import CONDUCTOR, DIELECTRIC, DIFFUSE, ROUGHPLASTIC, bitmap, bsdf
 from _cases_scene import (ENVMAP, GOLD, LIT, OBJ, ORTHOGRAPHIC, PERSPECTIVE, PLY, POLARIZED,
-                          POLARIZED_BSDFS, RED, TEXTURED, lit, shape)
+                          POLARIZED_BSDFS, RED, TEXTURED, shape)
 from _sheet import Case, Sheet
 
 
@@ -18,8 +18,9 @@ def renamed(prefix: str, cs: tuple[Case, ...]) -> tuple[Case, ...]:
 
 
 # ----------------------------------------------------------------------- the mono variant
-MONO = renamed("mono", (DIFFUSE[2], DIFFUSE[5], DIFFUSE[6], CONDUCTOR[1], DIELECTRIC[0],
-                        ROUGHCONDUCTOR[2], ROUGHPLASTIC[0], ROUGHPLASTIC[3]))
+# under the envmap of the envmap sheet (_cases_scene.py): one kernel for both
+MONO = renamed("mono", (DIFFUSE[2], DIFFUSE[6], CONDUCTOR[1], DIELECTRIC[0], ROUGHPLASTIC[0],
+                        ROUGHPLASTIC[3]))
 
 # ----------------------------------------------------------------------------- the film
 # crop windows that cut every tile of a row of four (96 x 24 pixels), the lenses' and
@@ -98,11 +99,7 @@ def stokes_sheets(variant: str, first: int) -> list[Sheet]:
 
 
 OUTPUT_SHEETS: list[Sheet] = [
-    Sheet("mono", MONO, variant="mono"),
-    lit("mono.envmap", ENVMAP, variant="mono", strict=False, xfail={"roughconductor": (
-        "the rgb envmap sheet's difference (_cases_scene.py: the glossy reflection of the "
-        "envmap's bright patch 1.4% brighter than Mitsuba's) in mono too: RMSE 0.0327 vs "
-        "Mitsuba's 0.0213 (refs/noise.json), ratio 1.53; not strict, as there")}),
+    Sheet("mono", MONO, variant="mono", cols=3, lights=ENVMAP),
     *(crop_sheet(n) for n in CROPS),
     Sheet("luminance", renamed("luminance", LIT), film=LUMINANCE),
     *aov_sheets(),

@@ -77,7 +77,6 @@ def test_pixel_formats(tmp_path):
 
     lum = load_scene(_film_scene(tmp_path, '<string name="pixel_format" value="luminance"/>'))
     assert lum.channel_names == ["Y"]
-    assert lum.render(spp=4).shape == (16, TILE, 1)
     for fmt, names in (("rgba", ["R", "G", "B"]), ("luminance_alpha", ["Y"]),
                        ("xyz", ["R", "G", "B"])):
         path = _film_scene(tmp_path, f'<string name="pixel_format" value="{fmt}"/>')
