@@ -67,7 +67,8 @@ AOV_CASES = (
           f'{bsdf("conductor")}</shape>'),
 )
 PATH = '<integrator type="path"><integer name="max_depth" value="6"/></integrator>'
-AOVS = {"depth": 1, "position": 3, "uv": 2, "geo_normal": 3, "sh_normal": 3, "albedo": 3}
+AOVS = {"depth": 1, "position": 3, "uv": 2, "geo_normal": 3, "sh_normal": 3, "albedo": 3,
+        "dp_du": 3, "dp_dv": 3}
 AOV = ('<integrator type="aov"><string name="aovs" value="'
        + ",".join(f"a{k}:{t}" for k, t in enumerate(AOVS)) + f'"/>{PATH}</integrator>')
 

@@ -90,7 +90,7 @@ def test_pixel_formats(tmp_path):
 
 # the AOVs that do not depend on the light: the same at any spp but for the pixels' coverage
 DETERMINISTIC = ("aov.depth", "aov.position", "aov.uv", "aov.geo_normal", "aov.sh_normal",
-                 "depth")
+                 "aov.dp_du", "aov.dp_dv", "depth")
 EDGE = 0.35  # a pixel may be off by this fraction of how much its 3x3 neighbourhood varies
 
 
