@@ -37,6 +37,7 @@ def crop_sheet(name: str) -> Sheet:
 
 
 LUMINANCE = '<string name="pixel_format" value="luminance"/>'
+CATMULLROM = '<rfilter type="catmullrom"/>'  # the catmullrom sheet's: its kernel is this one's
 
 # ---------------------------------------------------------------------------- the AOVs
 # shapes with their own uvs, normals and frames, and BSDFs whose albedo differs
@@ -102,7 +103,7 @@ def stokes_sheets(variant: str, first: int) -> list[Sheet]:
 OUTPUT_SHEETS: list[Sheet] = [
     Sheet("mono", MONO, variant="mono", cols=3, lights=ENVMAP),
     *(crop_sheet(n) for n in CROPS),
-    Sheet("luminance", renamed("luminance", LIT), film=LUMINANCE),
+    Sheet("luminance", renamed("luminance", LIT), film=LUMINANCE, rfilter=CATMULLROM),
     *aov_sheets(),
     Sheet("depth", renamed("depth", AOV_CASES), integrator='<integrator type="depth"/>'),
     Sheet("moment.xyz", renamed("moment.xyz", AOV_CASES), integrator=MOMENT, channels=(3, 4, 5)),
