@@ -92,6 +92,9 @@ PLACEHOLDERS = {
     # whether the BSDF has a lobe that emitter sampling can reach (Mitsuba's
     # BSDFFlags::Smooth): optional, plugins without `smooth()` are taken to have one
     "scene_bsdf_smooth": ("bsdfs", "smooth"),
+    # whether the BSDF's diffuse reflectance (the aov integrator's albedo) is the same seen
+    # from either side (Mitsuba's diffuse overrides eval_diffuse_reflectance so): optional
+    "scene_bsdf_albedo_two_sided": ("bsdfs", "albedo_two_sided"),
     # shading-frame perturbations (normalmap, bumpmap: stdlib/bsdf/perturbed.rdsl) and the
     # texture lookups they make
     "scene_bsdf_normal": ("bsdfs", "normal"),
@@ -99,7 +102,8 @@ PLACEHOLDERS = {
     "scene_texture_eval_1_grad": ("textures", "eval_1_grad"),
 }
 # methods a plugin may lack: its instances then give this constant
-OPTIONAL = {"disperses": False, "smooth": True, "normal": 0.0, "eval_3": 0.0, "eval_1_grad": 0.0}
+OPTIONAL = {"disperses": False, "smooth": True, "normal": 0.0, "eval_3": 0.0, "eval_1_grad": 0.0,
+            "albedo_two_sided": False}
 TEXTURE_PLACEHOLDER = "scene_texture_eval"
 TEXTURE_PLACEHOLDER_1 = "scene_texture_eval_1"
 EMITTER_KIND_PLACEHOLDER = "scene_has_emitter_kind"  # folded to the scene's emitter kinds

@@ -85,6 +85,15 @@ def develop(acc: np.ndarray, film: dict[str, Any]) -> np.ndarray:
     return (a[..., :c] / np.where(w == 0, np.float32(1), w)).astype(np.float32)
 
 
+def luminance_image(img: np.ndarray) -> np.ndarray:
+    """A developed image's R, G, B (its first three channels) as their luminance Y (the
+    linear sRGB primaries' Y, Mitsuba's ``luminance``), the other channels after it: an
+    hdrfilm's ``pixel_format`` luminance.  The filter is linear, so this equals the
+    filtered luminance of the samples."""
+    y = img[..., 0] * 0.212671 + img[..., 1] * 0.715160 + img[..., 2] * 0.072169
+    return np.concatenate([y[..., None], img[..., 3:]], -1).astype(np.float32)
+
+
 def film_reach(film: dict[str, Any]) -> int:
     """Columns (rows) a sample reaches on each side of its cell (as `film_reach` in rdsl)."""
     radius = _radius(film["filter"], film["filter_param"])

@@ -42,6 +42,8 @@ AOV_TYPES: dict[str, tuple[str, ...]] = {
     "sh_normal": ("X", "Y", "Z"),
     "uv": ("U", "V"),
     "albedo": ("R", "G", "B"),
+    "dp_du": ("X", "Y", "Z"),
+    "dp_dv": ("X", "Y", "Z"),
 }
 _SUFFIXES = {2: ("U", "V"), 3: ("X", "Y", "Z")}
 POLARIZED_ONLY = ("stokes",)  # Mitsuba refuses these in unpolarized variants

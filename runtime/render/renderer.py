@@ -40,7 +40,8 @@ from .bsdfs import (
 from .bvh import scene_bvh
 from .differentiable import SceneParams, gradient, render_forward
 from .emitters import KINDS as EMITTER_KINDS
-from .film import develop, film_reach, film_uniforms, new_accumulator, sample_weights
+from .film import (develop, film_reach, film_uniforms, luminance_image, new_accumulator,
+                   sample_weights)
 from .flatten import SceneBuffers, flatten
 from .integrators import integrator_instances, integrator_plan
 from .kernel_source import kernel_source, scene_plugins
@@ -319,9 +320,22 @@ class Scene:
         """The image's channels, as the EXR names them: R, G, B (Y in mono), then the AOVs of
         the integrator (runtime/render/integrators.py), then, rendering a derivative, its
         channels (``d.R``...)."""
+        names = self._film_channels
+        return ["Y"] + names[3:] if self._luminance else names
+
+    @property
+    def _film_channels(self) -> list[str]:
+        """The channels the film accumulates (the colour in the variant's own channels)."""
         base = ["Y"] if self.build.model.mono else ["R", "G", "B"]
         return base + integrator_plan(self.desc.integrator).aov_channel_names() + \
             [f"d.{c}" for c in base if self.derivative]
+
+    @property
+    def _luminance(self) -> bool:
+        """The film's ``pixel_format`` is luminance in a colour variant: the image's R, G, B
+        become their luminance Y, as Mitsuba's film develops them (AOVs stay)."""
+        fmt = self.desc.sensor.film.params.get("pixel_format", "rgb")
+        return fmt == "luminance" and not self.build.model.mono
 
     def render(self, spp: int | None = None, seed: int | None = None,
                threads: int | None = None, progress: bool = False,
@@ -337,7 +351,7 @@ class Scene:
                 raise CompileError("the render kernel traces rays through Embree, but the "
                                    f"scene was loaded with accel `{self.accel}`")
             mod.bind_scene(self.embree)
-        film = film_uniforms(self.desc.sensor.film, 1, channels=len(self.channel_names))
+        film = film_uniforms(self.desc.sensor.film, 1, channels=len(self._film_channels))
         cells = film["grid_w"] * film["grid_h"]
         batch = max(1, min(spp, BATCH_SAMPLES // max(cells, 1)))
         acc = new_accumulator(dict(film, spp=batch))
@@ -386,7 +400,8 @@ class Scene:
                     raise RenderCancelled(f"cancelled after {done} of {spp} spp")
         bar.finish()
         self.film_weights = ((spp, seed), keep)
-        return develop(acc.get() if hasattr(acc, "get") else acc, dict(film, spp=spp))
+        img = develop(acc.get() if hasattr(acc, "get") else acc, dict(film, spp=spp))
+        return luminance_image(img) if self._luminance else img
 
     def _scene_args(self, mod: Any) -> list[Any]:
         """The scene's buffers for ``mod``'s kernels: the arrays, or on a device target

@@ -63,6 +63,9 @@ class Sheet:
     rfilter: str = '<rfilter type="box"/>'
     backdrop: bool = True
     spp: int = SPP
+    film: str = ""  # more of the film's XML (pixel_format, ...)
+    crop: tuple[int, int, int, int] | None = None  # the film's crop window: x, y, width, height
+    channels: tuple[int, ...] = (0, 1, 2)  # the image's channels compared (AOVs: by index)
 
     @property
     def rows(self) -> int:
@@ -77,8 +80,19 @@ class Sheet:
         return c - (self.cols_used - 1) / 2, (self.rows - 1) / 2 - r
 
     def tile(self, img: np.ndarray, i: int) -> np.ndarray:
+        """Tile ``i`` of the sheet's image, or with a crop window its part in the window."""
         r, c = divmod(i, self.cols)
-        return img[r * TILE:(r + 1) * TILE, c * TILE:(c + 1) * TILE]
+        x, y = self.crop[:2] if self.crop else (0, 0)
+        return img[max(r * TILE - y, 0):max((r + 1) * TILE - y, 0),
+                   max(c * TILE - x, 0):max((c + 1) * TILE - x, 0)]
+
+    def pick(self, img: np.ndarray) -> np.ndarray:
+        """The channels the sheet compares, of a rendered image (H, W, C)."""
+        img = np.asarray(img, np.float64)
+        img = img.reshape(*img.shape[:2], -1)
+        if self.channels == (0, 1, 2):  # the colour: R, G, B, or Y alone (mono, luminance)
+            return img[..., :3]
+        return img[..., list(self.channels)]
 
 
 LIGHTS = """
@@ -116,8 +130,11 @@ def scene_xml(sheet: Sheet) -> str:
     backdrop = BACKDROP.format(sx=cols, sy=rows, cx=2 * cols, cy=2 * rows) \
         if sheet.backdrop else ""
     body = "\n  ".join(tiles)
+    crop = "".join(f'<integer name="{k}" value="{v}"/>' for k, v in zip(
+        ("crop_offset_x", "crop_offset_y", "crop_width", "crop_height"), sheet.crop or ()))
     film = (f'<film type="hdrfilm"><integer name="width" value="{cols * TILE}"/>'
-            f'<integer name="height" value="{rows * TILE}"/>{sheet.rfilter}</film>')
+            f'<integer name="height" value="{rows * TILE}"/>{crop}{sheet.film}'
+            f'{sheet.rfilter}</film>')
     sensor = (sheet.sensor or f"""<sensor type="perspective"><float name="fov" value="{fov:.6f}"/>
     <string name="fov_axis" value="x"/>
     <transform name="to_world"><lookat origin="0, 0, {DISTANCE}" target="0, 0, 0" up="0, 1, 0"/>
@@ -155,6 +172,12 @@ def mitsuba_variant(variant: str, live: bool) -> str:
     LLVM one where libLLVM is present."""
     if not live and os.environ.get("DRJIT_LIBLLVM_PATH"):
         return f"llvm_ad_{variant}"
+    try:  # the mitsuba wheel builds mono variants as LLVM ones only (they need libLLVM)
+        import mitsuba as mi
+        if f"scalar_{variant}" not in mi.variants() and f"llvm_ad_{variant}" in mi.variants():
+            return f"llvm_ad_{variant}"
+    except ImportError:
+        pass
     return f"scalar_{variant}"
 
 
@@ -163,7 +186,7 @@ def mitsuba_render(path: Path, variant: str, spp: int, seed: int) -> np.ndarray:
 
     mi.set_variant(variant)
     img = mi.render(mi.load_file(str(path)), spp=spp, seed=seed)
-    return np.array(img, np.float64)[..., :3]
+    return np.array(img, np.float64)  # every channel: a sheet picks its own
 
 
 def specialized() -> bool:
@@ -207,21 +230,34 @@ def _mitsuba_live(path: Path, sh: Sheet) -> list[np.ndarray] | None:
     try:
         import mitsuba as mi
         mi.set_variant(mitsuba_variant(sh.variant, True))
-    except (ImportError, AttributeError, ValueError):
+    except (ImportError, AttributeError, ValueError, RuntimeError):
         return None
     scene = mi.load_file(str(path))
-    return [np.array(mi.render(scene, spp=sh.spp, seed=100 + s), np.float64)[..., :3]
-            for s in SEEDS]
+    return [sh.pick(mi.render(scene, spp=sh.spp, seed=100 + s)) for s in SEEDS]
+
+
+def rdsl_images(sh: Sheet) -> list[np.ndarray]:
+    """rdsl's renders of the sheet at its spp, one per seed of SEEDS, its channels picked;
+    sheets of one scene (the AOVs of one render) render it once."""
+    import tempfile
+
+    from rdsl.runtime.render.renderer import load_scene
+
+    if not _TMP:
+        _TMP.append(Path(tempfile.mkdtemp(prefix="rdsl-compat-")))
+    path = write(sh, _TMP[0] / sh.name)
+    key = (path.read_text(), sh.variant, sh.spp)
+    if key not in _RENDERS:
+        scene = load_scene(path, variant=sh.variant, specialize=specialized())
+        _RENDERS[key] = [scene.render(spp=sh.spp, seed=s) for s in SEEDS]
+    return [sh.pick(m) for m in _RENDERS[key]]
 
 
 def measure(sheets: list[Sheet] | Sheet | str, live: bool = True
             ) -> dict[str, tuple[float, float, str]]:
     """Per case of the sheet: (rdsl's RMSE, Mitsuba's, where Mitsuba's comes from: 'live'
     or 'noise.json'), medians over SEEDS; raises what loading the sheet raises.  Cached."""
-    import tempfile
-
     from rdsl.runtime.render.image import read_exr
-    from rdsl.runtime.render.renderer import load_scene
 
     sh = sheets if isinstance(sheets, Sheet) else None
     if sh is None:
@@ -229,12 +265,9 @@ def measure(sheets: list[Sheet] | Sheet | str, live: bool = True
         sh = BY_NAME[sheets]
     if (sh.name, live) in _MEASURED:
         return _MEASURED[sh.name, live]
-    if not _TMP:
-        _TMP.append(Path(tempfile.mkdtemp(prefix="rdsl-compat-")))
+    ref = read_exr(ref_path(sh)).astype(np.float64)
+    mine = rdsl_images(sh)
     path = write(sh, _TMP[0] / sh.name)
-    ref = read_exr(ref_path(sh)).astype(np.float64)[..., :3]
-    scene = load_scene(path, variant=sh.variant, specialize=specialized())
-    mine = [np.asarray(scene.render(spp=sh.spp, seed=s), np.float64)[..., :3] for s in SEEDS]
     theirs = _mitsuba_live(path, sh) if live else None
     out = {}
     for i, c in enumerate(sh.cases):
@@ -250,3 +283,4 @@ def measure(sheets: list[Sheet] | Sheet | str, live: bool = True
 
 
 _MEASURED: dict[tuple[str, bool], dict[str, tuple[float, float, str]]] = {}
+_RENDERS: dict[tuple[str, str, int], list[np.ndarray]] = {}

@@ -29,7 +29,7 @@ SEEDS = (11, 12, 13)
 
 
 def mitsuba_noise(path: Path, sh: S.Sheet, ref: np.ndarray) -> dict[str, float]:
-    imgs = [S.mitsuba_render(path, S.mitsuba_variant(sh.variant, True), sh.spp, s)
+    imgs = [sh.pick(S.mitsuba_render(path, S.mitsuba_variant(sh.variant, True), sh.spp, s))
             for s in SEEDS]
     return {c.name: float(np.median([S.rmse(sh.tile(m, i), sh.tile(ref, i)) for m in imgs]))
             for i, c in enumerate(sh.cases)}
@@ -52,7 +52,8 @@ def main() -> None:
         t0 = time.time()
         with tempfile.TemporaryDirectory() as tmp:
             path = S.write(sh, Path(tmp))
-            ref = S.mitsuba_render(path, S.mitsuba_variant(sh.variant, False), S.REF_SPP, 1)
+            ref = sh.pick(S.mitsuba_render(path, S.mitsuba_variant(sh.variant, False),
+                                           S.REF_SPP, 1))
             write_exr(S.ref_path(sh), ref.astype(np.float32))
             noise[sh.name] = {"spp": sh.spp, "ref_spp": S.REF_SPP,
                               "rmse": mitsuba_noise(path, sh, ref)}
