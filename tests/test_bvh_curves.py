@@ -34,13 +34,14 @@ except Exception as e:  # pragma: no cover - depends on the machine
 
 
 def _curves() -> str:
-    """A bent helix of 12 points (joints at every point, radii varying), a cone of very
-    different end radii, and short fat segments whose cones lie inside their end spheres
-    (|b - a| < |rb - ra|)."""
+    """A bent helix of 12 points (joints at every point, radii varying), a straight cone of
+    very different end radii in 3 pieces, and short fat segments, some of whose cones lie
+    inside their end spheres (|b - a| < |rb - ra|)."""
     s = np.linspace(0, 3.0, 12)
     helix = np.c_[0.6 * np.cos(2 * s), 0.6 * np.sin(2 * s), 0.3 * s - 0.5,
                   0.06 + 0.04 * np.sin(3 * s)]
-    cone = np.array([[-1.2, -0.8, 0.2, 0.3], [0.2, -1.0, -0.2, 0.05]])
+    w = np.linspace(0, 1, 4)[:, None]
+    cone = np.array([-1.2, -0.8, 0.2, 0.3]) * (1 - w) + np.array([0.2, -1.0, -0.2, 0.05]) * w
     fat = np.array([[0.9, 0.8, 0.0, 0.3], [1.0, 0.85, 0.0, 0.1], [1.2, 0.7, 0.1, 0.12],
                     [1.25, 0.5, 0.1, 0.02]])
     return "\n\n".join("\n".join(" ".join(f"{x:.6f}" for x in p) for p in c)

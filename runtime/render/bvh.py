@@ -186,21 +186,24 @@ def build_bvh(lo: Any, hi: Any, leaf_size: int = 4, bins: int = 16) -> Bvh:
 
 def _curve_segments(bufs: Any, s: int) -> tuple[np.ndarray, np.ndarray, np.ndarray,
                                                  np.ndarray]:
-    """Shape ``s``'s linear curve segments (geometry.rdsl's layout of their entries in F):
-    their boxes (the end points' grown by the larger radius, as Embree's), their slot entry
-    -2 - (offset in P of the first control point) and slot data (stdlib/render/bvh.rdsl)."""
+    """Shape ``s``'s curve segments (geometry.rdsl's layout of their entries in F): their
+    boxes (their control points' grown by the largest radius among them, as Embree's),
+    their slot entry -2 - (offset in P of the first control point) and slot data
+    (stdlib/render/bvh.rdsl)."""
     base = int(bufs.G.reshape(-1, 4)[s, 0])
     nseg = int(bufs.F[base])
     if nseg >= 2**24:  # the slot data holds the index as a float
         raise CompileError(f"the rdsl BVH (--accel bvh) takes curves of at most {2**24 - 1:,} "
                            f"segments, got {nseg:,}; render with Embree (--accel embree)", None)
     o = bufs.F[base + 2:base + 2 + nseg].astype(np.int64)
-    q = bufs.P[o[:, None] + np.arange(8)].astype(np.float64).reshape(-1, 2, 4)
+    span = 4 if bufs.G.reshape(-1, 4)[s, 3] & 128 else 2  # B-spline or linear
+    q = bufs.P[o[:, None] + np.arange(4 * span)].astype(np.float64).reshape(-1, span, 4)
     r = q[:, :, 3].max(axis=1, keepdims=True)
     data = np.zeros((nseg, 3))
     data[:, 0] = np.arange(nseg)
-    data[1:, 1] = o[:-1] + 4 == o[1:]  # the previous segment ends where this one starts
-    data[:-1, 2] = o[1:] == o[:-1] + 4
+    if span == 2:  # whether the previous segment ends where this one starts, and the next
+        data[1:, 1] = o[:-1] + 4 == o[1:]
+        data[:-1, 2] = o[1:] == o[:-1] + 4
     return q[:, :, :3].min(axis=1) - r, q[:, :, :3].max(axis=1) + r, -2 - o, data
 
 
