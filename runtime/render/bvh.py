@@ -31,6 +31,8 @@ NODE_INTS = 4  # BI: escape, first primitive slot, primitive count (0: inner), u
 PRIM_INTS = 2  # BI: global triangle index (-1 for an analytic shape), shape (geometry id)
 TRI_FLOATS = 9  # BV: v0, v1 - v0, v2 - v0 of a triangle slot (zeros for an analytic one)
 HEADER = 4  # BI[0]: node count, BI[1]: first prim slot's offset, BI[2]: BV's triangle offset
+# a uniform cubic B-spline segment's control points to the Bezier ones of the same curve
+BSPLINE_TO_BEZIER = np.array([[1, 4, 1, 0], [0, 4, 2, 0], [0, 2, 4, 0], [0, 1, 4, 1]]) / 6
 
 
 @dataclass
@@ -187,7 +189,8 @@ def build_bvh(lo: Any, hi: Any, leaf_size: int = 4, bins: int = 16) -> Bvh:
 def _curve_segments(bufs: Any, s: int) -> tuple[np.ndarray, np.ndarray, np.ndarray,
                                                  np.ndarray]:
     """Shape ``s``'s curve segments (geometry.rdsl's layout of their entries in F): their
-    boxes (their control points' grown by the largest radius among them, as Embree's),
+    boxes (their control points' grown by the largest radius among them, as Embree's; a
+    B-spline's Bezier control points, whose hull holds the segment alone),
     their slot entry -2 - (offset in P of the first control point) and slot data
     (stdlib/render/bvh.rdsl)."""
     base = int(bufs.G.reshape(-1, 4)[s, 0])
@@ -198,6 +201,8 @@ def _curve_segments(bufs: Any, s: int) -> tuple[np.ndarray, np.ndarray, np.ndarr
     o = bufs.F[base + 2:base + 2 + nseg].astype(np.int64)
     span = 4 if bufs.G.reshape(-1, 4)[s, 3] & 128 else 2  # B-spline or linear
     q = bufs.P[o[:, None] + np.arange(4 * span)].astype(np.float64).reshape(-1, span, 4)
+    if span == 4:  # the same curve's Bezier control points: a tighter hull
+        q = np.einsum("ij,sjk->sik", BSPLINE_TO_BEZIER, q)
     r = q[:, :, 3].max(axis=1, keepdims=True)
     data = np.zeros((nseg, 3))
     data[:, 0] = np.arange(nseg)
