@@ -234,16 +234,6 @@ def test_bad_curve_shape(tmp_path, case):
     check_bad(tmp_path, *BAD[case])
 
 
-def test_the_rdsl_bvh_refuses_curves(tmp_path):
-    import rdsl
-    from rdsl.compiler.diagnostics import CompileError
-
-    curve_files(tmp_path)
-    path = write_scene(tmp_path, shapes(), room=False)
-    with pytest.raises(CompileError, match=r"cannot trace curves.*--accel embree"):
-        rdsl.load_scene(path, accel="bvh")
-
-
 def test_curve_file_layout(tmp_path):
     """Tabs, CRLF line ends and runs of blank lines read as Mitsuba reads them: a blank line
     ends a curve; each curve's segments start at its points but the last (1 or 3)."""

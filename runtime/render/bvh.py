@@ -24,11 +24,15 @@ from typing import Any
 
 import numpy as np
 
+from ...compiler.diagnostics import CompileError
+
 NODE_FLOATS = 8  # BV: lower corner, upper corner, 2 unused
 NODE_INTS = 4  # BI: escape, first primitive slot, primitive count (0: inner), unused
 PRIM_INTS = 2  # BI: global triangle index (-1 for an analytic shape), shape (geometry id)
 TRI_FLOATS = 9  # BV: v0, v1 - v0, v2 - v0 of a triangle slot (zeros for an analytic one)
 HEADER = 4  # BI[0]: node count, BI[1]: first prim slot's offset, BI[2]: BV's triangle offset
+# a uniform cubic B-spline segment's control points to the Bezier ones of the same curve
+BSPLINE_TO_BEZIER = np.array([[1, 4, 1, 0], [0, 4, 2, 0], [0, 2, 4, 0], [0, 1, 4, 1]]) / 6
 
 
 @dataclass
@@ -182,16 +186,60 @@ def build_bvh(lo: Any, hi: Any, leaf_size: int = 4, bins: int = 16) -> Bvh:
                time.perf_counter() - t0)
 
 
-def _primitives(bufs: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+def _curve_segments(bufs: Any, s: int) -> tuple[np.ndarray, np.ndarray, np.ndarray,
+                                                 np.ndarray]:
+    """Shape ``s``'s curve segments (geometry.rdsl's layout of their entries in F): their
+    boxes (their control points' grown by the largest radius among them, as Embree's; a
+    B-spline's Bezier control points, whose hull holds the segment alone),
+    their slot entry -2 - (offset in P of the first control point) and slot data
+    (stdlib/render/bvh.rdsl)."""
+    base = int(bufs.G.reshape(-1, 4)[s, 0])
+    nseg = int(bufs.F[base])
+    if nseg >= 2**24:  # the slot data holds the index as a float
+        raise CompileError(f"the rdsl BVH (--accel bvh) takes curves of at most {2**24 - 1:,} "
+                           f"segments, got {nseg:,}; render with Embree (--accel embree)", None)
+    o = bufs.F[base + 2:base + 2 + nseg].astype(np.int64)
+    span = 4 if bufs.G.reshape(-1, 4)[s, 3] & 128 else 2  # B-spline or linear
+    q = bufs.P[o[:, None] + np.arange(4 * span)].astype(np.float64).reshape(-1, span, 4)
+    if span == 4:  # the same curve's Bezier control points: a tighter hull
+        q = np.einsum("ij,sjk->sik", BSPLINE_TO_BEZIER, q)
+    r = q[:, :, 3].max(axis=1, keepdims=True)
+    data = np.zeros((nseg, 3))
+    data[:, 0] = np.arange(nseg)
+    if span == 2:  # whether the previous segment ends where this one starts, and the next
+        data[1:, 1] = o[:-1] + 4 == o[1:]
+        data[:-1, 2] = o[1:] == o[:-1] + 4
+    return q[:, :, :3].min(axis=1) - r, q[:, :, :3].max(axis=1) + r, -2 - o, data
+
+
+def _record_box(P: np.ndarray, o: int, flags: int) -> tuple[np.ndarray, np.ndarray]:
+    """The box of the sphere, SDF grid or disk of record ``o`` in P."""
+    if flags & 4:  # a sphere: center and radius
+        c, r = P[o + 24:o + 27], P[o + 27]
+        return c - r, c + r
+    rows = P[o:o + 12].reshape(3, 4)
+    if flags & 32:  # an SDF grid: the unit cube's image under to_world's rows
+        corners = np.array([[(k >> a) & 1 for a in range(3)] for k in range(8)], float)
+        world = corners @ rows[:, :3].T + rows[:, 3]
+        return world.min(axis=0), world.max(axis=0)
+    half = np.hypot(rows[:, 0], rows[:, 1])  # a disk: the unit disk's image
+    return rows[:, 3] - half, rows[:, 3] + half
+
+
+def _primitives(bufs: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray,
+                                    np.ndarray]:
     """The scene's primitives: their boxes (lo, hi), their global triangle index (-1 for an
-    analytic shape) and their shape, triangles first, from the flattened buffers."""
+    analytic shape, -2 - offset for a curve segment), their shape and their slot data (3
+    floats; zero but for curve segments), triangles first, from the flattened buffers."""
     G = bufs.G.reshape(-1, 4)
     tris, shapes, los, his = [], [], [], []
-    records = []
+    records, curves = [], []
     for s, mesh in enumerate(bufs.meshes):
         if isinstance(mesh, tuple):
             tris.append(np.arange(G[s, 0], G[s, 0] + len(mesh[1])))
             shapes.append(np.full(len(mesh[1]), s))
+        elif G[s, 3] & 192:
+            curves.append(s)
         else:
             records.append(s)
     tri = np.concatenate(tris) if tris else np.zeros(0, np.int64)
@@ -203,33 +251,29 @@ def _primitives(bufs: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarr
         his.append(corners.max(axis=1))
     P = bufs.P.astype(np.float64)
     for s in records:
-        o = int(G[s, 0])
-        if G[s, 3] & 4:  # a sphere: center and radius
-            c, r = P[o + 24:o + 27], P[o + 27]
-            los.append((c - r)[None])
-            his.append((c + r)[None])
-        elif G[s, 3] & 32:  # an SDF grid: the unit cube's image under to_world's rows
-            rows = P[o:o + 12].reshape(3, 4)
-            corners = np.array([[(k >> a) & 1 for a in range(3)] for k in range(8)], float)
-            world = corners @ rows[:, :3].T + rows[:, 3]
-            los.append(world.min(axis=0)[None])
-            his.append(world.max(axis=0)[None])
-        else:  # a disk: the unit disk's image under to_world's rows
-            rows = P[o:o + 12].reshape(3, 4)
-            half = np.hypot(rows[:, 0], rows[:, 1])
-            los.append((rows[:, 3] - half)[None])
-            his.append((rows[:, 3] + half)[None])
+        lo, hi = _record_box(P, int(G[s, 0]), int(G[s, 3]))
+        los.append(lo[None])
+        his.append(hi[None])
+    datas = [np.zeros((len(tri) + len(records), 3))]
     tri = np.r_[tri, np.full(len(records), -1)]
     shape = np.r_[shape, np.array(records, np.int64)]
+    for s in curves:
+        lo, hi, entry, data = _curve_segments(bufs, s)
+        los.append(lo)
+        his.append(hi)
+        tri, shape = np.r_[tri, entry], np.r_[shape, np.full(len(entry), s)]
+        datas.append(data)
+    data = np.concatenate(datas)
     if not los:
-        return np.zeros((0, 3)), np.zeros((0, 3)), tri, shape
-    return np.concatenate(los), np.concatenate(his), tri, shape
+        return np.zeros((0, 3)), np.zeros((0, 3)), tri, shape, data
+    return np.concatenate(los), np.concatenate(his), tri, shape, data
 
 
-def flatten_bvh(bvh: Bvh, tri: np.ndarray, shape: np.ndarray, P: np.ndarray, F: np.ndarray
-                ) -> tuple[np.ndarray, np.ndarray]:
+def flatten_bvh(bvh: Bvh, tri: np.ndarray, shape: np.ndarray, P: np.ndarray, F: np.ndarray,
+                data: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """``BV`` and ``BI`` (stdlib/render/bvh.rdsl's layout) of a BVH over primitives of
-    global triangle index ``tri`` (-1: analytic) and shape ``shape``."""
+    global triangle index ``tri`` (-1: analytic, -2 - offset: a curve segment), shape
+    ``shape`` and, for the others than triangles, slot data ``data`` (N, 3)."""
     n, m = bvh.nodes, len(bvh.prims)
     bi = np.zeros(HEADER + NODE_INTS * n + PRIM_INTS * m + 1, np.int32)
     bi[0], bi[1], bi[2] = n, HEADER + NODE_INTS * n, NODE_FLOATS * n
@@ -242,11 +286,13 @@ def flatten_bvh(bvh: Bvh, tri: np.ndarray, shape: np.ndarray, P: np.ndarray, F: 
     boxes[:, 0:3], boxes[:, 3:6] = bvh.lo, bvh.hi
     t = tri[bvh.prims]
     is_tri = t >= 0
+    slot = bv[NODE_FLOATS * n:NODE_FLOATS * n + TRI_FLOATS * m].reshape(m, TRI_FLOATS)
     if is_tri.any():
         idx = F.reshape(-1, 3)[t[is_tri]]
         v = P.reshape(-1)[3 * idx[..., None] + np.arange(3)]  # (k, 3, 3), float32
-        data = bv[NODE_FLOATS * n:NODE_FLOATS * n + TRI_FLOATS * m].reshape(m, TRI_FLOATS)
-        data[is_tri] = np.concatenate([v[:, 0], v[:, 1] - v[:, 0], v[:, 2] - v[:, 0]], axis=1)
+        slot[is_tri] = np.concatenate([v[:, 0], v[:, 1] - v[:, 0], v[:, 2] - v[:, 0]], axis=1)
+    if data is not None and m:
+        slot[~is_tri, :3] = data[bvh.prims][~is_tri]
     return bv, bi
 
 
@@ -254,9 +300,9 @@ def scene_bvh(bufs: Any, leaf_size: int = 4, bins: int = 16) -> tuple[np.ndarray
                                                                       Bvh]:
     """The BVH over a scene's flattened buffers (runtime/render/renderer.py's
     ``SceneBuffers``): ``BV``, ``BI`` and the tree."""
-    lo, hi, tri, shape = _primitives(bufs)
+    lo, hi, tri, shape, data = _primitives(bufs)
     bvh = build_bvh(lo, hi, leaf_size, bins)
-    bv, bi = flatten_bvh(bvh, tri, shape, bufs.P, bufs.F)
+    bv, bi = flatten_bvh(bvh, tri, shape, bufs.P, bufs.F, data)
     return bv, bi, bvh
 
 

@@ -279,11 +279,6 @@ def flatten(desc: Any, triangulate: bool = False, model: ColorModel = RGB,
     Colours in buffers are stored as ``model`` reads them (runtime/render/colors.py)."""
     if not instancing:
         _check_copies(desc.shapes)
-        curved = next((s for s in desc.shapes if s.curves is not None), None)
-        if curved is not None:
-            raise CompileError(f"the rdsl BVH (--accel bvh) cannot trace curves (shape "
-                               f"'{curved.type}'); render on the CPU with Embree "
-                               "(--accel embree)", curved.loc)
     check_measured_variant(scene_bsdfs(desc), model)
     fl = _Flattener(model)
     for shape_index, shape in enumerate(desc.shapes):
