@@ -36,6 +36,9 @@ class Color:
     rgb: tuple[float, float, float]
     wavelengths: tuple[float, ...] | None = None
     values: tuple[float, ...] | None = None
+    # the rgb variants' colour is ``rgb`` as given, not recomputed from the pairs (Mitsuba's
+    # spectrum plugins d65, uniform and srgb)
+    fixed_rgb: bool = False
 
     @staticmethod
     def gray(value: float) -> Color:
@@ -79,7 +82,7 @@ def as_reflectance(color: Color, name: str) -> Color:
     Mitsuba 3's rgb variants take them: seen under D65 and clamped to [0, 1] (``eta`` and
     ``k`` only at 0).  The pairs stay for the spectral variants; a colour without pairs is
     returned as it is."""
-    if color.wavelengths is None:
+    if color.wavelengths is None or color.fixed_rgb:
         return color
     wl, v = np.asarray(color.wavelengths, np.float64), np.asarray(color.values, np.float64)
     rgb = (spectral.spectrum_to_rgb_unbounded(wl, v) if name in UNBOUNDED

@@ -43,6 +43,7 @@ from .spectra import (
     read_spd,
     spectrum_to_srgb,
 )
+from .spectrum_plugins import spectrum_plugin
 
 OBJECT_TAGS = ("shape", "bsdf", "texture", "emitter", "integrator", "sensor", "film",
                "sampler", "rfilter", "volume")
@@ -308,6 +309,8 @@ class _Reader:
             node = self.read_object(el, parent)
             self.add_child(parent, Child(el.attrs.get("name") and self.substitute(
                 el.attrs["name"], el), node, el.loc))
+        elif tag == "spectrum" and "type" in el.attrs:
+            self.read_spectrum_plugin(parent, el)
         elif tag in PROPERTY_TAGS:
             a = self.attrs(el)
             name = self.need(el, a, "name")
@@ -324,6 +327,28 @@ class _Reader:
         else:
             raise scene_error(f"unknown element <{tag}>; accepted: "
                               f"{', '.join(OBJECT_TAGS + PROPERTY_TAGS + OTHER_TAGS)}", el.loc)
+
+    def read_spectrum_plugin(self, parent: ObjectNode, el: Element) -> None:
+        """``<spectrum type="..." name="...">`` with nested properties: one of Mitsuba's
+        spectrum plugins, read as a ``<spectrum>`` property of ``parent``."""
+        for key in el.attrs:
+            if key not in ("type", "name"):
+                raise scene_error(f"<spectrum type=...>: unexpected attribute '{key}'; "
+                                  "accepted: type, name", el.loc)
+        a = {k: self.substitute(v, el) for k, v in el.attrs.items()}
+        name = self.need(el, a, "name")
+        if parent.category == "scene":
+            raise scene_error(f"<spectrum name=\"{name}\">: a property must be inside an "
+                              "object, not directly inside <scene>", el.loc)
+        props: dict[str, tuple[str, Any, Loc]] = {}
+        for c in el.children:
+            if c.tag not in PROPERTY_TAGS or c.tag == "transform":
+                raise scene_error(f"<{c.tag}> cannot appear inside <spectrum type=...>; "
+                                  "give its parameters as <float>, <string> or <rgb>", c.loc)
+            ca = self.attrs(c)
+            props[self.need(c, ca, "name")] = (c.tag, self.read_value(c, ca), c.loc)
+        self.check_unique(parent, name, el.loc)
+        parent.props[name] = Prop("spectrum", spectrum_plugin(a["type"], props, el.loc), el.loc)
 
     def check_unique(self, parent: ObjectNode, name: str, loc: Loc) -> None:
         clash = name in parent.props or any(c.name == name for c in parent.children)
