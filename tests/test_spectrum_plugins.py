@@ -81,3 +81,48 @@ def test_spectrum_plugin_errors(tmp_path: Path) -> None:
         with pytest.raises(CompileError) as e:
             rdsl.load_scene(path).render(spp=1)
         assert message in str(e.value) and "bad.xml:" in str(e.value), str(e.value)
+
+
+def test_load_dict_takes_spectrum_plugins(tmp_path: Path) -> None:
+    """``{"type": "blackbody", ...}`` and the others in Mitsuba's dict form give the image of
+    the same scene written in XML."""
+    pytest.importorskip("rdsl.runtime.embree")
+    import rdsl
+    cam = {"type": "perspective", "fov": 40.0,
+           "to_world": rdsl.Transform4f().look_at([0, 0, 4], [0, 0, 0], [0, 1, 0]),
+           "film": {"type": "hdrfilm", "width": 16, "height": 16}}
+    d = {"type": "scene", "integrator": {"type": "path", "max_depth": 2}, "sensor": cam,
+         "env": {"type": "constant", "radiance": {"type": "srgb", "color": [0.2, 0.5, 0.9]}},
+         "ball": {"type": "sphere", "radius": 0.6, "center": [-0.7, 0.0, 0.0],
+                  "bsdf": {"type": "diffuse", "reflectance": {
+                      "type": "irregular", "wavelengths": [380, 520, 800],
+                      "values": "0.2, 0.9, 0.3"}}},
+         "lamp": {"type": "rectangle",
+                  "to_world": rdsl.Transform4f().translate([0.7, 0, 0]).scale(0.6),
+                  "emitter": {"type": "area", "radiance": {"type": "blackbody",
+                                                           "temperature": 3200.0}}}}
+    xml = f"""<scene version="3.0.0">
+  <integrator type="path"><integer name="max_depth" value="2"/></integrator>
+  <sensor type="perspective"><float name="fov" value="40"/>
+    <transform name="to_world"><lookat origin="0, 0, 4" target="0, 0, 0" up="0, 1, 0"/>
+    </transform>
+    <film type="hdrfilm"><integer name="width" value="16"/><integer name="height" value="16"/>
+    </film></sensor>
+  <emitter type="constant"><spectrum type="srgb" name="radiance">
+    <rgb name="color" value="0.2, 0.5, 0.9"/></spectrum></emitter>
+  <shape type="sphere"><float name="radius" value="0.6"/>
+    <point name="center" x="-0.7" y="0" z="0"/>
+    <bsdf type="diffuse"><spectrum type="irregular" name="reflectance">
+      <string name="wavelengths" value="380, 520, 800"/>
+      <string name="values" value="0.2, 0.9, 0.3"/></spectrum></bsdf></shape>
+  <shape type="rectangle">
+    <transform name="to_world"><scale value="0.6"/><translate x="0.7"/></transform>
+    <emitter type="area"><spectrum type="blackbody" name="radiance">
+      <float name="temperature" value="3200"/></spectrum></emitter></shape>
+</scene>"""
+    path = tmp_path / "s.xml"
+    path.write_text(xml)
+    ours = rdsl.load_dict(d, variant="spectral").render(spp=4, seed=1)
+    ref = rdsl.load_scene(path, variant="spectral").render(spp=4, seed=1)
+    assert float(np.abs(ref).max()) > 0
+    np.testing.assert_array_equal(ours, ref)

@@ -28,6 +28,7 @@ import numpy as np
 
 from . import transform as xf
 from .errors import scene_error
+from .spectrum_plugins import PLUGINS as SPECTRUM_PLUGINS
 
 __all__ = ["Transform4f", "dict_to_xml"]
 
@@ -184,6 +185,8 @@ class _Writer:
             raise _error(f"load_dict: {path}: a nested dict needs a \"type\"")
         if ptype in _VALUE_TYPES:
             return [pad + self.value(key, ptype, value, path)]
+        if ptype in SPECTRUM_PLUGINS and not top:  # {"type": "blackbody", ...}
+            return self.spectrum_plugin(key, ptype, value, path, indent)
         category = self.categories.get(ptype)
         if category is None:
             raise _error(f"load_dict: {path}: unknown plugin type {ptype!r}")
@@ -198,6 +201,23 @@ class _Writer:
             if k not in ("type", "id"):
                 lines += self.item(k, v, f"{path}[{k!r}]", indent=indent + 1)
         lines.append(f"{pad}</{category}>")
+        return lines
+
+    def spectrum_plugin(self, key: str, ptype: str, value: Mapping[str, Any], path: str,
+                        indent: int) -> list[str]:
+        """One of Mitsuba's spectrum plugins (``<spectrum type=... name=...>``); an srgb
+        ``color`` given as 3 numbers is an ``<rgb>``, a list of ``values`` or ``wavelengths``
+        the comma-separated string Mitsuba's XML takes."""
+        lines = [f"{'    ' * indent}<spectrum type={quoteattr(ptype)} name={quoteattr(key)}>"]
+        for k, v in value.items():
+            if k == "type":
+                continue
+            if k == "color" and not isinstance(v, Mapping):
+                v = {"type": "rgb", "value": v}
+            elif k in ("values", "wavelengths") and not isinstance(v, str):
+                v = ", ".join(repr(float(x)) for x in np.asarray(v, np.float64).reshape(-1))
+            lines += self.item(k, v, f"{path}[{k!r}]", indent=indent + 1)
+        lines.append(f"{'    ' * indent}</spectrum>")
         return lines
 
     @staticmethod
