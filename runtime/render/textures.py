@@ -68,10 +68,15 @@ def load_bitmap(path: str | Path, raw: bool = False) -> np.ndarray:
 
 
 def _read_bitmap(path: Path, raw: bool) -> np.ndarray:
-    if path.suffix.lower() == ".exr":
+    suffix = path.suffix.lower()
+    if suffix == ".exr":
         from .image import read_exr
 
         a = read_exr(path)
+    elif suffix in (".hdr", ".rgbe", ".pfm"):  # linear, as EXR
+        from .float_images import read_pfm, read_rgbe
+
+        a = read_pfm(path) if suffix == ".pfm" else read_rgbe(path)
     else:
         Image = _pillow()
         with Image.open(path) as im:

@@ -325,7 +325,9 @@ SCENE_CHILDREN = ("shape", "bsdf", "texture", "emitter", "integrator", "sensor")
 AOV_TYPES = ("albedo", "depth", "position", "uv", "geo_normal", "sh_normal", "dp_du", "dp_dv",
              "duv_dx", "duv_dy", "prim_index", "shape_index")
 
-BITMAP_FORMATS = (".png", ".jpg", ".jpeg", ".exr")
+# what Mitsuba 3's Bitmap reads (runtime/render/textures.py)
+BITMAP_FORMATS = (".png", ".jpg", ".jpeg", ".exr", ".hdr", ".rgbe", ".pfm", ".bmp", ".tga",
+                  ".ppm")
 
 
 def plugin_types(category: str) -> list[str]:
