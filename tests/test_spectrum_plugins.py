@@ -101,13 +101,7 @@ def test_load_dict_takes_spectrum_plugins(tmp_path: Path) -> None:
                   "to_world": rdsl.Transform4f().translate([0.7, 0, 0]).scale(0.6),
                   "emitter": {"type": "area", "radiance": {"type": "blackbody",
                                                            "temperature": 3200.0}}}}
-    xml = f"""<scene version="3.0.0">
-  <integrator type="path"><integer name="max_depth" value="2"/></integrator>
-  <sensor type="perspective"><float name="fov" value="40"/>
-    <transform name="to_world"><lookat origin="0, 0, 4" target="0, 0, 0" up="0, 1, 0"/>
-    </transform>
-    <film type="hdrfilm"><integer name="width" value="16"/><integer name="height" value="16"/>
-    </film></sensor>
+    xml = scene_header("0, 0, 4", "0, 0, 0", "0, 1, 0", fov=40, res=16, max_depth=2) + """
   <emitter type="constant"><spectrum type="srgb" name="radiance">
     <rgb name="color" value="0.2, 0.5, 0.9"/></spectrum></emitter>
   <shape type="sphere"><float name="radius" value="0.6"/>
