@@ -52,6 +52,7 @@ def rgb3(img: np.ndarray) -> np.ndarray:
 
 def block_error(a: np.ndarray, b: np.ndarray, k: int = 8) -> float:
     """Largest difference of k x k block means, relative to ``b``'s (plus 0.05)."""
+    k = max(1, min(k, a.shape[0], a.shape[1]))
     h, w = (a.shape[0] // k) * k, (a.shape[1] // k) * k
 
     def blocks(x: np.ndarray) -> np.ndarray:

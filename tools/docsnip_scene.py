@@ -84,9 +84,12 @@ def build_scene(kind: str, text: str, res: int) -> str:
             sensor = text
     if sensor is None:
         sensor = SENSOR.format(sampler=sampler, film=film)
-    # a $name the snippet uses gets a <default> (a colour-like "0.2, 0.4, 0.6")
-    defaults = [f'<default name="{n}" value="0.2, 0.4, 0.6"/>'
-                for n in dict.fromkeys(re.findall(r"\$([A-Za-z_]\w*)", text))]
+    # a $name the snippet uses gets a <default>: 16 where an <integer> takes it, else the
+    # colour "0.2, 0.4, 0.6"
+    defaults = []
+    for n in dict.fromkeys(re.findall(r"\$([A-Za-z_]\w*)", text)):
+        integer = re.search(r"<integer[^>]*\$" + n + r"\b", text)
+        defaults.append(f'<default name="{n}" value="{16 if integer else "0.2, 0.4, 0.6"}"/>')
     parts = [*defaults, integrator, sensor, *lights, *body]
     return '<scene version="3.0.0">\n' + "\n".join(parts) + "\n</scene>\n"
 
