@@ -182,8 +182,8 @@ BAD_SCENES = {
                         "<include>: file 'parts/walls.xml' not found"),
     "bitmap_format": (['<bsdf type="diffuse" id="d">',
                        '    <texture type="bitmap" name="reflectance">',
-                       '        <string name="filename" value="tex.tga"/>', '    </texture>',
-                       '</bsdf>'], 4, "bitmap: image format '.tga' of 'tex.tga' is not supported"),
+                       '        <string name="filename" value="tex.gif"/>', '    </texture>',
+                       '</bsdf>'], 4, "bitmap: image format '.gif' of 'tex.gif' is not supported"),
     "property_at_top": (['<float name="x" value="1"/>'], 2,
                         "a property must be inside an object"),
     "two_integrators": (['<integrator type="path"/>', '<integrator type="direct"/>'], 3,
@@ -197,7 +197,7 @@ BAD_SCENES = {
 @pytest.mark.parametrize("case", sorted(BAD_SCENES))
 def test_bad_scene(tmp_path: Path, case: str) -> None:
     body, line, message = BAD_SCENES[case]
-    (tmp_path / "tex.tga").write_bytes(b"")
+    (tmp_path / "tex.gif").write_bytes(b"")
     path = scene(tmp_path, *body)
     with pytest.raises(SceneError) as exc:
         load(path)
