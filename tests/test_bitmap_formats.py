@@ -120,3 +120,34 @@ def test_broken_image_is_a_clear_error(name: str, content: bytes, tmp_path: Path
     with pytest.raises(CompileError) as e:
         rdsl.load_scene(path).render(spp=1)
     assert name in str(e.value) and "s.xml:" in str(e.value), str(e.value)
+
+
+def test_storage_and_sampling_options_are_accepted(tmp_path: Path) -> None:
+    """bitmap's ``format`` and ``accel`` (how Mitsuba stores texels) and envmap's
+    ``mis_compensation`` (how it samples) change no expectation: rdsl accepts them and
+    renders the image it renders without them, bit for bit; a wrong value is an error at
+    its line."""
+    import rdsl
+
+    ASSETS = Path(__file__).resolve().parent / "compat" / "assets"
+    bitmap = f'<string name="filename" value="{ASSETS / "tex_rgb.png"}"/>'
+    env = f'<string name="filename" value="{ASSETS / "env.exr"}"/>'
+
+    def scene(extra_tex: str, extra_env: str) -> Path:
+        path = tmp_path / f"s{len(list(tmp_path.iterdir()))}.xml"
+        path.write_text(
+            '<scene version="3.0.0">\n<sensor type="perspective"><film type="hdrfilm">'
+            '<integer name="width" value="16"/><integer name="height" value="16"/></film>'
+            '</sensor>\n<shape type="sphere"><transform name="to_world"><translate z="5"/>'
+            '</transform><bsdf type="diffuse"><texture type="bitmap" name="reflectance">'
+            f'{bitmap}{extra_tex}</texture></bsdf></shape>\n'
+            f'<emitter type="envmap">{env}{extra_env}</emitter>\n</scene>\n')
+        return path
+
+    plain = rdsl.load_scene(scene("", "")).render(spp=4, seed=1)
+    opts = scene('<string name="format" value="fp16"/><boolean name="accel" value="false"/>',
+                 '<boolean name="mis_compensation" value="true"/>')
+    assert np.array_equal(rdsl.load_scene(opts).render(spp=4, seed=1), plain)
+    bad = scene('<string name="format" value="fp8"/>', "")
+    with pytest.raises(Exception, match=rf"{bad}:3.*format"):
+        rdsl.load_scene(bad)

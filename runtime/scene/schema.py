@@ -224,7 +224,10 @@ _SPECS = [
         **_TEX, "filename": P("string", REQUIRED),
         "filter_type": P("string", "bilinear", ("bilinear", "nearest")),
         "wrap_mode": P("string", "repeat", ("repeat", "mirror", "clamp")),
-        "raw": P("boolean", False)}),
+        "raw": P("boolean", False),
+        # Mitsuba's storage format and GPU texture units: accepted, rdsl stores float32
+        "format": P("string", "variant", ("variant", "fp16", "fp32")),
+        "accel": P("boolean", True)}),
     PluginSpec("texture", "checkerboard", {**_TEX, "color0": P("color", 0.4),
                                            "color1": P("color", 0.2)}),
     # a PLY mesh's per-vertex or per-face attribute (runtime/scene/mesh_attributes.py)
@@ -260,7 +263,10 @@ _SPECS = [
     PluginSpec("emitter", "envmap", {"filename": P("string", REQUIRED), "scale": P("float", 1.0),
                                      "to_world": P("transform"),
                                      "filter_type": P("string", "bilinear",
-                                                      ("bilinear", "nearest"))}),
+                                                      ("bilinear", "nearest")),
+                                     # a sampling strategy (variance, not the expectation):
+                                     # accepted, rdsl samples the map's luminance
+                                     "mis_compensation": P("boolean", False)}),
     # integrators
     PluginSpec("integrator", "path", {"max_depth": P("integer", -1),
                                       "rr_depth": P("integer", 5),
