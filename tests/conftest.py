@@ -1,4 +1,4 @@
-"""The test suite's kernel tier.
+"""The test suite's kernel tier (and a check that xdist groups what it should).
 
 Kernels compile at LLVM O0 (``RDSL_QUICK=1``, the quick tier of ``rdsl.jit``) in the tests
 of rendering and plugins: O0 and O3 give the same results bit for bit (no fast-math, no
@@ -29,3 +29,18 @@ def _kernel_tier(request: pytest.FixtureRequest):
     with pytest.MonkeyPatch.context() as mp:
         mp.setenv("RDSL_QUICK", "0")
         yield
+
+
+def pytest_configure(config: pytest.Config) -> None:
+    """``--dist loadgroup`` must group: a compat sheet's cases share one render per worker
+    (``xdist_group``).  pytest-xdist up to 3.8 groups by rewriting a node id attribute that
+    pytest 9 no longer reads, and then renders each sheet on every worker, silently."""
+    if config.getoption("dist", "no") != "loadgroup" or hasattr(config, "workerinput"):
+        return
+    import xdist
+
+    xdist_version = tuple(int(x) for x in xdist.__version__.split(".")[:2] if x.isdigit())
+    if pytest.version_tuple[0] >= 9 and xdist_version <= (3, 8):
+        raise pytest.UsageError(f"pytest-xdist {xdist.__version__} cannot group tests "
+                                f"(--dist loadgroup) under pytest {pytest.__version__}: "
+                                "install pytest<9, as pyproject.toml's test extra says")

@@ -38,6 +38,7 @@ def c_compiled():
 
 
 @needs_cc
+@pytest.mark.xdist_group("corpus-c")  # one worker: the module fixtures build once
 @pytest.mark.parametrize("case", sorted(CASES), ids=lambda c: f"{c[0]}.{c[1]}")
 def test_corpus_matches_interpreter(case, interp_modules, c_compiled):  # noqa: F811
     check_case(case, interp_modules[case[0]], c_compiled)

@@ -94,6 +94,7 @@ def _bits(a: np.ndarray) -> np.ndarray:
     return np.where(np.isnan(a), np.float32(np.nan), a).view(np.uint32)
 
 
+@pytest.mark.xdist_group("corpus-llvm")  # one worker: the module fixtures build once
 @pytest.mark.parametrize("case", sorted(CASES), ids=lambda c: f"{c[0]}.{c[1]}")
 def test_matches_interpreter(case, interp_modules, compiled):
     check_case(case, interp_modules[case[0]], compiled)

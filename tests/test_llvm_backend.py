@@ -176,7 +176,11 @@ def _op_module(width: int) -> ir.Module:
     return m
 
 
-@pytest.fixture(scope="module", params=runnable_targets())
+# one worker per target (under --dist loadgroup): the library builds once
+@pytest.fixture(scope="module", params=[
+    pytest.param(*t.values, id=t.values[0],
+                 marks=[*t.marks, pytest.mark.xdist_group(f"ops-{t.values[0]}")])
+    for t in runnable_targets()])
 def ops_lib(request, tmp_path_factory):
     t = get_target(request.param)
     return build_and_load(_op_module(t.width), t.name, tmp_path_factory.mktemp(t.name))

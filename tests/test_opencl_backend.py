@@ -60,6 +60,7 @@ def cl_compiled():
             for w in WIDTHS for f in CORPUS.glob("*.rdsl")}
 
 
+@pytest.mark.xdist_group("corpus-opencl")  # one worker: the module fixtures build once
 @pytest.mark.parametrize("case", sorted(CASES), ids=lambda c: f"{c[0]}.{c[1]}")
 def test_corpus_matches_interpreter(case, interp_modules, cl_compiled):  # noqa: F811
     check_case(case, interp_modules[case[0]], cl_compiled)

@@ -83,8 +83,15 @@ def _check_float_semantics(ptx: str) -> None:
     assert "fma." not in ptx, "a fused multiply-add (the IR has none)"
 
 
+def _one_worker(items: list, name) -> list:
+    """``items`` as params each of whose architectures run on one worker (``--dist
+    loadgroup``), so that the IR they share (``@cache``) compiles once."""
+    return [pytest.param(x, id=name(x), marks=pytest.mark.xdist_group(f"ptx-{name(x)}"))
+            for x in items]
+
+
 @pytest.mark.parametrize("arch", PTX_ARCHS)
-@pytest.mark.parametrize("path", PLUGINS, ids=lambda p: f"{p.parent.name}.{p.stem}")
+@pytest.mark.parametrize("path", _one_worker(PLUGINS, lambda p: f"{p.parent.name}.{p.stem}"))
 def test_stdlib_plugin_passes_ptxas(path: Path, arch: str):
     exe, gpu = _ptxas(arch)
     module = _ir(path)
@@ -121,6 +128,7 @@ def test_render_kernel_with_embree_queries_is_refused():
 
 @pytest.mark.skipif(not BVH_LANDED, reason="the BVH in rdsl (stdlib/render/bvh.rdsl, "
                     "issue 14 item 1) has not landed: the render kernel's rays need it")
+@pytest.mark.xdist_group("ptx-cbox")  # the IR they share (@cache) compiles once
 @pytest.mark.parametrize("arch", PTX_ARCHS)
 def test_cbox_render_kernel_passes_ptxas(arch: str):
     exe, gpu = _ptxas(arch)
@@ -169,7 +177,7 @@ def _integrator_module(name: str, folder: Path):
 @pytest.mark.skipif(not BVH_LANDED, reason="the BVH in rdsl (stdlib/render/bvh.rdsl, "
                     "issue 14 item 1) has not landed: the render kernel's rays need it")
 @pytest.mark.parametrize("arch", PTX_ARCHS)
-@pytest.mark.parametrize("name", sorted(INTEGRATORS))
+@pytest.mark.parametrize("name", _one_worker(sorted(INTEGRATORS), str))
 def test_stdlib_integrator_passes_ptxas(name: str, arch: str, tmp_path_factory):
     exe, gpu = _ptxas(arch)
     ptx = emit_ptx(_integrator_module(name, tmp_path_factory.getbasetemp()), ptx_target(arch))

@@ -67,6 +67,7 @@ def spirv_compiled():
 
 
 @needs_vulkan
+@pytest.mark.xdist_group("corpus-spirv")  # one worker: the module fixtures build once
 @pytest.mark.parametrize("case", sorted(CASES), ids=lambda c: f"{c[0]}.{c[1]}")
 def test_corpus_matches_interpreter(case, interp_modules, spirv_compiled):  # noqa: F811
     check_case(case, interp_modules[case[0]], spirv_compiled)
