@@ -53,6 +53,9 @@ from .shapes import KINDS as SHAPE_KINDS
 ACCELS = ("embree", "bvh")  # how rays are traced (`--accel`)
 # samples per kernel call: small enough that a batch's sample buffers stay in cache
 BATCH_SAMPLES = 1 << 17
+# the most memory a render keeps of its samples' film weights for a backward() of the same
+# samples (which then skips a plain pass); a larger render (a high-spp target) keeps none
+KEEP_WEIGHTS_BYTES = 32 << 20
 # renders of at most this many samples, whose kernels are not in the cache yet, compile the
 # quick tier (LLVM O0): it saves about 40% of a cold compile, more than its slower kernels
 # (15-30%) lose on a render of this size (docs/bench.md)
@@ -388,6 +391,8 @@ class Scene:
                 self.nonfinite += int(np.count_nonzero(prev["bad"]))
                 if keep is not None:
                     keep.append(sample_weights(prev, film_reach(film), cells))
+                    if sum(w.nbytes for pair in keep for w in pair) > KEEP_WEIGHTS_BYTES:
+                        keep = None  # a large render: backward recomputes them instead
                 bar.update(done)
             waiting = None
             if job is not None:
