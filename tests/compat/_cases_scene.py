@@ -387,21 +387,7 @@ SCENE_SHEETS: list[Sheet] = [
     Sheet("area", AREA),
     lit("point_spot", POINT_SPOT),
     lit("directional_constant", DIRECTIONAL),
-    lit(
-        "envmap",
-        ENVMAP,
-        xfail={
-            "roughconductor": (
-                "the glossy reflection of the envmap's small bright patch is 1.4% brighter than "
-                "Mitsuba's (tile means 0.2823 vs 0.2783 at 1024 spp; RMSE 0.0253 vs 0.0190 "
-                "at 32 spp, ratio 1.33); the diffuse and plastic tiles match: envmap "
-                "sampling or lookup, not found. Not strict: at the test's 32 spp Mitsuba's "
-                "own RMSE on this tile moves 22% between seed sets (0.0190 for seeds "
-                "101-103, 0.0231 for refs/noise.json's 11-13), so the test cannot decide it"
-            )
-        },
-        strict=False,
-    ),
+    lit("envmap", ENVMAP),
     lit("spot_texture", SPOT_TEXTURE),
     lit("projector", PROJECTOR),
     lit("projector_spectral", PROJECTOR, variant="spectral"),
