@@ -3,7 +3,9 @@ srgb" name="...">`` with nested properties (runtime/scene/spectrum_plugins.py), 
 Mitsuba 3 itself: each sets both the radiance of an area light the camera sees directly and
 the reflectance of a sphere under a uniform white environment, so the image holds the
 spectrum's emitted colour and its reflected colour, both noise-free in their centres.  The
-rgb variant only for the plugins Mitsuba's rgb variants take (uniform, d65, srgb)."""
+rgb variant against Mitsuba's rgb for the plugins its rgb variants take (uniform, d65, srgb);
+for the others (which Mitsuba's rgb variants refuse) rdsl's rgb light against Mitsuba's
+spectral one."""
 
 from __future__ import annotations
 
@@ -43,11 +45,11 @@ def scene(plugin: str) -> str:
 """
 
 
-@pytest.mark.parametrize("variant", ["spectral", "rgb"])
-@pytest.mark.parametrize("plugin", list(PLUGINS))
+CASES = [(p, "spectral") for p in PLUGINS] + [(p, "rgb") for p in RGB_OK]
+
+
+@pytest.mark.parametrize("plugin,variant", CASES, ids=[f"{p}-{v}" for p, v in CASES])
 def test_spectrum_plugin_matches_mitsuba(plugin: str, variant: str, tmp_path: Path) -> None:
-    if variant == "rgb" and plugin not in RGB_OK:
-        pytest.skip("Mitsuba's rgb variants refuse this spectrum plugin")
     path = tmp_path / "s.xml"
     path.write_text(scene(plugin))
     ours, theirs = render_both(path, variant, spp=64)
@@ -60,6 +62,28 @@ def test_spectrum_plugin_matches_mitsuba(plugin: str, variant: str, tmp_path: Pa
     if plugin in ("srgb", "regular", "irregular", "blackbody"):
         b = theirs[light].mean(axis=(0, 1))
         assert b.max() - b.min() > 0.05 * b.max()
+
+
+@pytest.mark.parametrize("plugin", [p for p in PLUGINS if p not in RGB_OK])
+def test_rgb_takes_the_srgb_projection(plugin: str, tmp_path: Path) -> None:
+    """Mitsuba's rgb variants refuse these plugins (checked); rdsl's rgb variant takes the
+    spectrum's sRGB projection, so the light the camera sees is the colour Mitsuba's
+    spectral variant develops for it."""
+    from _mitsuba_render import mitsuba_variant
+    from rdsl.runtime.render.renderer import load_scene
+
+    pytest.importorskip("rdsl.runtime.embree")
+    path = tmp_path / "s.xml"
+    path.write_text(scene(plugin))
+    with mitsuba_variant("scalar_rgb") as mi:
+        with pytest.raises(Exception, match="[Nn]ot implemented"):  # when it renders
+            mi.render(mi.load_file(str(path)), spp=1)
+    with mitsuba_variant("scalar_spectral") as mi:
+        theirs = np.array(mi.render(mi.load_file(str(path)), spp=64, seed=1))[..., :3]
+    ours = np.asarray(load_scene(path, variant="rgb").render(spp=64, seed=2))[..., :3]
+    light = (slice(6, 10), slice(10, 13))
+    a, b = ours[light].mean(axis=(0, 1)), theirs[light].mean(axis=(0, 1))
+    np.testing.assert_allclose(a, b, rtol=0.03, atol=0.01 * max(1.0, float(b.max())))
 
 
 def test_spectrum_plugin_errors(tmp_path: Path) -> None:
