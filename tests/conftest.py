@@ -37,10 +37,11 @@ def pytest_configure(config: pytest.Config) -> None:
     pytest 9 no longer reads, and then renders each sheet on every worker, silently."""
     if config.getoption("dist", "no") != "loadgroup" or hasattr(config, "workerinput"):
         return
-    import xdist
+    from importlib.metadata import version
 
-    xdist_version = tuple(int(x) for x in xdist.__version__.split(".")[:2] if x.isdigit())
+    xdist = version("pytest-xdist")  # the distribution --dist comes from (the test extra)
+    xdist_version = tuple(int(x) for x in xdist.split(".")[:2] if x.isdigit())
     if pytest.version_tuple[0] >= 9 and xdist_version <= (3, 8):
-        raise pytest.UsageError(f"pytest-xdist {xdist.__version__} cannot group tests "
+        raise pytest.UsageError(f"pytest-xdist {xdist} cannot group tests "
                                 f"(--dist loadgroup) under pytest {pytest.__version__}: "
                                 "install pytest<9, as pyproject.toml's test extra says")
