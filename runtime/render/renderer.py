@@ -373,6 +373,7 @@ class Scene:
         waiting = None  # (samples, n) of the rendered batch the film has not taken yet
         done = k = 0
         keep = [] if self._prm_set and not self.derivative else None  # weights, for backward
+        kept_bytes = 0
         while done < spp or waiting is not None:
             job = None
             if done < spp:
@@ -391,7 +392,8 @@ class Scene:
                 self.nonfinite += int(np.count_nonzero(prev["bad"]))
                 if keep is not None:
                     keep.append(sample_weights(prev, film_reach(film), cells))
-                    if sum(w.nbytes for pair in keep for w in pair) > KEEP_WEIGHTS_BYTES:
+                    kept_bytes += sum(w.nbytes for w in keep[-1])
+                    if kept_bytes > KEEP_WEIGHTS_BYTES:
                         keep = None  # a large render: backward recomputes them instead
                 bar.update(done)
             waiting = None
