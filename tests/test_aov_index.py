@@ -65,10 +65,33 @@ GROUP = f"""<shape type="shapegroup" id="grp">
   </shape>"""
 
 
-def scene(folder: Path) -> Path:
+# an SDF grid of a sphere (5^3 samples) and a bent linear curve
+SDF_SHAPES = [
+    ("linearcurve", (0, 1.5), '<shape type="linearcurve"><string name="filename" '
+                              f'value="lin.txt"/>{_at(0, 1.5, 1.5)}</shape>'),
+    ("rectangle", (-2, 2), f'<shape type="rectangle">{_at(-2, 2)}</shape>'),
+    ("sdfgrid", (0, -1), '<shape type="sdfgrid"><string name="filename" value="g.vol"/>'
+                         '<transform name="to_world"><scale value="2"/>'
+                         '<translate x="-1" y="-2" z="-1"/></transform></shape>'),
+]
+LINEAR = "-1.0 0.0 0.0 0.2\n0.0 0.3 0.2 0.3\n1.0 0.0 0.5 0.1\n"
+
+
+def _files(folder: Path) -> None:
+    from rdsl.runtime.scene.volgrid import write_vol
+
     (folder / "fan.obj").write_text(FAN_OBJ)
     (folder / "quad.ply").write_text(QUAD_PLY)
-    body = "\n  ".join(xml for _, _, xml in SHAPES)
+    (folder / "lin.txt").write_text(LINEAR)
+    x = np.linspace(0.0, 1.0, 5)
+    z, y, x = np.meshgrid(x, x, x, indexing="ij")
+    write_vol(folder / "g.vol", (np.sqrt((x - 0.5) ** 2 + (y - 0.5) ** 2 + (z - 0.5) ** 2)
+                                 - 0.4).astype(np.float32))
+
+
+def scene(folder: Path, shapes: list = SHAPES) -> Path:
+    _files(folder)
+    body = "\n  ".join(xml for _, _, xml in shapes)
     path = folder / "index.xml"
     path.write_text(f"""<scene version="3.0.0">
   <integrator type="aov"><string name="aovs" value="pi:prim_index,si:shape_index"/>
@@ -98,47 +121,68 @@ def solid(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return ok
 
 
-@pytest.fixture(scope="module")
-def mitsuba_render(tmp_path_factory):
+def mitsuba_render(path: Path) -> tuple:
     """Mitsuba's prim_index and shape_index at two seeds, and the centre (x, y) of the shape
     at each place of its shape list."""
-    path = scene(tmp_path_factory.mktemp("aov_index"))
     with mitsuba_variant("scalar_rgb") as mi:
         s = mi.load_file(str(path))
         a, b = (np.array(mi.render(s, spp=32, seed=k)) for k in (1, 2))
-        centres = [tuple(np.round(np.array(sh.bbox().center())[:2], 3)) for sh in s.shapes()]
-    return path, a, b, centres
+        centres = [_centre(np.array(sh.bbox().center())[:2]) for sh in s.shapes()]
+    return a, b, centres
+
+
+@pytest.fixture(scope="module")
+def mixed(tmp_path_factory):
+    path = scene(tmp_path_factory.mktemp("aov_index"))
+    return (path, *mitsuba_render(path))
 
 
 def _centre(c: tuple) -> tuple:
     return tuple(round(float(x), 3) for x in c)
 
 
-@pytest.mark.parametrize("accel,triangulate", [("embree", False), ("bvh", False),
-                                               ("embree", True)])
-def test_indices_match_mitsuba(mitsuba_render, accel, triangulate):
+def check(path: Path, a: np.ndarray, b: np.ndarray, centres: list, shapes: list,
+          min_prims: int, **options) -> None:
+    """rdsl's render of ``path`` against Mitsuba's ``a`` and ``b`` where a primitive
+    covers the whole pixel."""
     from rdsl.runtime.render.renderer import load_scene
 
-    path, a, b, centres = mitsuba_render
-    sc = load_scene(path, variant="rgb", target="host", accel=accel, triangulate=triangulate)
+    sc = load_scene(path, variant="rgb", target="host", **options)
     assert sc.channel_names[-2:] == ["pi.I", "si.I"]
     ours = sc.render(spp=16, seed=3)
-    # prim_index: the same triangle wherever one covers the pixel
+    # prim_index: the same primitive wherever one covers the pixel
     prim = solid(a[..., -2], b[..., -2])
-    assert prim.sum() > 1000 and len(np.unique(a[..., -2][prim])) >= 8
+    assert len(np.unique(a[..., -2][prim])) >= min_prims
     np.testing.assert_array_equal(ours[..., -2][prim], a[..., -2][prim])
     # shape_index: misses 0 and non-meshes as Mitsuba numbers them; meshes name the same shape
     ok = solid(a[..., -1], b[..., -1])
     theirs, mine = a[..., -1][ok].astype(int), ours[..., -1][ok].astype(int)
     assert np.all(ours[..., -1][ok] == mine)
-    kinds = [t for t, _, _ in SHAPES]
+    kinds = [t for t, _, _ in shapes]
     order = ([k for k, t in enumerate(kinds) if t not in MESHES]
              + [k for k, t in enumerate(kinds) if t in MESHES])
-    named = {place: _centre(SHAPES[k][1]) for place, k in enumerate(order, 1)}
+    named = {place: _centre(shapes[k][1]) for place, k in enumerate(order, 1)}
     meshes = theirs > len(order) - sum(t in MESHES for t in kinds)
     np.testing.assert_array_equal(mine[~meshes], theirs[~meshes])
-    assert [named[v] for v in mine[meshes]] == [_centre(centres[v - 1]) for v in theirs[meshes]]
-    assert set(theirs) == set(range(len(SHAPES) + 1))  # every shape and the background seen
+    assert [named[v] for v in mine[meshes]] == [centres[v - 1] for v in theirs[meshes]]
+    assert set(theirs) == set(range(len(shapes) + 1))  # every shape and the background seen
+
+
+@pytest.mark.parametrize("accel,triangulate", [("embree", False), ("bvh", False),
+                                               ("embree", True)])
+def test_indices_match_mitsuba(mixed, accel, triangulate):
+    """Meshes from OBJ and PLY, a rectangle with an area emitter, a cube, a sphere, a disk,
+    a cylinder, two instances of a shapegroup (a cube and a sphere), shapes with a `<ref>`'d
+    BSDF; with Embree, with the rdsl BVH (instances copied), and triangulated."""
+    check(*mixed, SHAPES, 8, accel=accel, triangulate=triangulate)
+
+
+@pytest.mark.parametrize("accel", ["embree", "bvh"])
+def test_curve_and_sdfgrid_indices_match_mitsuba(tmp_path, accel):
+    """A curve's segment and an SDF grid's voxel (numbered among the voxels that hold
+    surface, as Mitsuba's primitives)."""
+    path = scene(tmp_path, SDF_SHAPES)
+    check(path, *mitsuba_render(path), SDF_SHAPES, 6, accel=accel)
 
 
 def test_bad_aov_type_is_a_diagnostic(tmp_path):

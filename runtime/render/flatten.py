@@ -28,8 +28,8 @@ from .declared import declared_instance
 from .emitters import EmitterTables, emitter_tables
 from .measured import check_measured_variant
 from .shapes import FLAGS as SHAPE_FLAGS
-from .shapes import (INSTANCED, instance_record, mitsuba_numbers, one_prim, shape_record,
-                     user_geometry)
+from .shapes import (INSTANCED, instance_record, mitsuba_numbers, one_prim, sdf_voxel_ranks,
+                     shape_record, user_geometry)
 from .shapes import KINDS as SHAPE_KINDS
 from .textures import TextureTable
 
@@ -162,7 +162,10 @@ class _Flattener:
             analytic = None
         if analytic is not None:  # G's first entry is set by finish(), with the records
             self.items.append(user_geometry(analytic))
-            self.records.append((row, 0, shape_record(analytic)))
+            record = shape_record(analytic)
+            if analytic.kind == "sdfgrid":  # then Mitsuba's numbers of its voxels
+                record = np.r_[record, sdf_voxel_ranks(analytic.grid)]
+            self.records.append((row, 0, record))
             if emitter >= 0:
                 self.lights.append((-1, row, analytic.area))
                 self.analytic[row] = analytic

@@ -63,6 +63,19 @@ def shape_record(shape: Analytic) -> np.ndarray:
     return rec
 
 
+def sdf_voxel_ranks(grid: np.ndarray) -> np.ndarray:
+    """Mitsuba 3's prim_index of each voxel of an SDF grid of samples (z, y, x), in
+    sdfgrid.rdsl's numbering x + (nx - 1) (y + (ny - 1) z): Mitsuba makes a primitive of
+    each voxel that holds surface (corners of both signs, a zero counts as both), in that
+    order, so a voxel's number is its rank among those (-1 for the others)."""
+    g = np.asarray(grid, np.float32)
+    nz, ny, nx = g.shape
+    corners = np.stack([g[z:nz - 1 + z, y:ny - 1 + y, x:nx - 1 + x]
+                        for z in (0, 1) for y in (0, 1) for x in (0, 1)])
+    held = ((corners.min(axis=0) <= 0) & (corners.max(axis=0) >= 0)).reshape(-1)
+    return np.where(held, np.cumsum(held) - 1, -1)
+
+
 def instance_record(to_world: np.ndarray) -> np.ndarray:
     """An instance's record for ``P`` (geometry.rdsl): rows of to_world, rows of its inverse
     transpose (normals) and the sign of its determinant."""
@@ -110,4 +123,4 @@ def one_prim(shape: Any) -> int:
 
 
 __all__ = ["FLAGS", "INSTANCED", "INSTANCED_KIND", "KINDS", "MI_ANALYTIC", "MI_INDEX_SHIFT",
-           "RECORD", "instance_record", "mitsuba_numbers", "one_prim", "shape_record", "user_geometry"]
+           "RECORD", "instance_record", "mitsuba_numbers", "one_prim", "sdf_voxel_ranks", "shape_record", "user_geometry"]
