@@ -33,29 +33,34 @@ QUAD_PLY = ("ply\nformat ascii 1.0\nelement vertex 4\nproperty float x\nproperty
             "end_header\n-1 -1 0\n1 -1 0\n1 1 0\n-1 1 0\n3 0 1 3\n3 1 2 3\n")
 
 
-def _at(x: float, y: float, s: float = 0.8, rotate: str = "") -> str:
-    return (f'<transform name="to_world">{rotate}<scale value="{s}"/>'
+def _at(x: float, y: float, s: float = 0.8, first: str = "") -> str:
+    return (f'<transform name="to_world">{first}<scale value="{s}"/>'
             f'<translate x="{x}" y="{y}"/></transform>')
 
 
 CUBE_TURN = '<rotate x="1" angle="30"/><rotate y="1" angle="40"/>'
+FILE = '<string name="filename" value="{}"/>'
+EMITTER = '<emitter type="area"><rgb name="radiance" value="1"/></emitter>'
+SPHERE = '<point name="center" x="-2" y="2" z="0"/><float name="radius" value="0.8"/>'
+CYLINDER = ('<float name="radius" value="0.7"/><point name="p0" x="-2.8" y="-2" z="0"/>'
+            '<point name="p1" x="-1.2" y="-2" z="0"/>')
+
+
+def _shape(kind: str, centre: tuple, inner: str) -> tuple[str, tuple, str]:
+    return kind, centre, f'<shape type="{kind}">{inner}</shape>'
+
+
 # (type, centre, XML) of each shape in declaration order, on a 3 x 3 grid
 SHAPES = [
-    ("obj", (0, 2), f'<shape type="obj"><string name="filename" value="fan.obj"/>{_at(0, 2)}'
-                    '<ref id="mat"/></shape>'),
-    ("sphere", (-2, 2), '<shape type="sphere"><point name="center" x="-2" y="2" z="0"/>'
-                        '<float name="radius" value="0.8"/></shape>'),
-    ("rectangle", (2, 2), f'<shape type="rectangle">{_at(2, 2)}<emitter type="area">'
-                          '<rgb name="radiance" value="1"/></emitter></shape>'),
-    ("cube", (-2, 0), f'<shape type="cube">{_at(-2, 0, 0.55, CUBE_TURN)}</shape>'),
-    ("ply", (0, 0), f'<shape type="ply"><string name="filename" value="quad.ply"/>{_at(0, 0)}'
-                    '</shape>'),
-    ("disk", (2, 0), f'<shape type="disk">{_at(2, 0)}<ref id="mat"/></shape>'),
-    ("cylinder", (-2, -2), '<shape type="cylinder"><float name="radius" value="0.7"/>'
-                           '<point name="p0" x="-2.8" y="-2" z="0"/>'
-                           '<point name="p1" x="-1.2" y="-2" z="0"/></shape>'),
-    ("instance", (0, -2), f'<shape type="instance"><ref id="grp"/>{_at(0, -2, 1)}</shape>'),
-    ("instance", (2, -2), f'<shape type="instance"><ref id="grp"/>{_at(2, -2, 1)}</shape>'),
+    _shape("obj", (0, 2), FILE.format("fan.obj") + _at(0, 2) + '<ref id="mat"/>'),
+    _shape("sphere", (-2, 2), SPHERE),
+    _shape("rectangle", (2, 2), _at(2, 2) + EMITTER),
+    _shape("cube", (-2, 0), _at(-2, 0, 0.55, CUBE_TURN)),
+    _shape("ply", (0, 0), FILE.format("quad.ply") + _at(0, 0)),
+    _shape("disk", (2, 0), _at(2, 0) + '<ref id="mat"/>'),
+    _shape("cylinder", (-2, -2), CYLINDER),
+    _shape("instance", (0, -2), '<ref id="grp"/>' + _at(0, -2, 1)),
+    _shape("instance", (2, -2), '<ref id="grp"/>' + _at(2, -2, 1)),
 ]
 MESHES = ("obj", "ply", "rectangle", "cube")
 GROUP = f"""<shape type="shapegroup" id="grp">
@@ -66,13 +71,11 @@ GROUP = f"""<shape type="shapegroup" id="grp">
 
 
 # an SDF grid of a sphere (5^3 samples) and a bent linear curve
+CENTRED = '<translate x="-0.5" y="-0.5" z="-0.5"/>'  # the grid's unit cube around 0
 SDF_SHAPES = [
-    ("linearcurve", (0, 1.5), '<shape type="linearcurve"><string name="filename" '
-                              f'value="lin.txt"/>{_at(0, 1.5, 1.5)}</shape>'),
-    ("rectangle", (-2, 2), f'<shape type="rectangle">{_at(-2, 2)}</shape>'),
-    ("sdfgrid", (0, -1), '<shape type="sdfgrid"><string name="filename" value="g.vol"/>'
-                         '<transform name="to_world"><scale value="2"/>'
-                         '<translate x="-1" y="-2" z="-1"/></transform></shape>'),
+    _shape("linearcurve", (0, 1.5), FILE.format("lin.txt") + _at(0, 1.5, 1.5)),
+    _shape("rectangle", (-2, 2), _at(-2, 2)),
+    _shape("sdfgrid", (0, -1), FILE.format("g.vol") + _at(0, -1, 2, CENTRED)),
 ]
 LINEAR = "-1.0 0.0 0.0 0.2\n0.0 0.3 0.2 0.3\n1.0 0.0 0.5 0.1\n"
 

@@ -28,8 +28,15 @@ from .declared import declared_instance
 from .emitters import EmitterTables, emitter_tables
 from .measured import check_measured_variant
 from .shapes import FLAGS as SHAPE_FLAGS
-from .shapes import (INSTANCED, instance_record, mitsuba_numbers, one_prim, sdf_voxel_ranks,
-                     shape_record, user_geometry)
+from .shapes import (
+    INSTANCED,
+    instance_record,
+    mitsuba_numbers,
+    one_prim,
+    sdf_voxel_ranks,
+    shape_record,
+    user_geometry,
+)
 from .shapes import KINDS as SHAPE_KINDS
 from .textures import TextureTable
 

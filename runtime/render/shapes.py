@@ -123,4 +123,5 @@ def one_prim(shape: Any) -> int:
 
 
 __all__ = ["FLAGS", "INSTANCED", "INSTANCED_KIND", "KINDS", "MI_ANALYTIC", "MI_INDEX_SHIFT",
-           "RECORD", "instance_record", "mitsuba_numbers", "one_prim", "sdf_voxel_ranks", "shape_record", "user_geometry"]
+           "RECORD", "instance_record", "mitsuba_numbers", "one_prim", "sdf_voxel_ranks",
+           "shape_record", "user_geometry"]
