@@ -16,6 +16,7 @@ integer in two renders of different seeds and in its 8 neighbours.
 
 from __future__ import annotations
 
+import shutil
 from pathlib import Path
 
 import numpy as np
@@ -145,12 +146,12 @@ def _centre(c: tuple) -> tuple:
 
 
 def check(path: Path, a: np.ndarray, b: np.ndarray, centres: list, shapes: list,
-          min_prims: int, **options) -> None:
+          min_prims: int, target: str = "host", **options) -> None:
     """rdsl's render of ``path`` against Mitsuba's ``a`` and ``b`` where a primitive
     covers the whole pixel."""
     from rdsl.runtime.render.renderer import load_scene
 
-    sc = load_scene(path, variant="rgb", target="host", **options)
+    sc = load_scene(path, variant="rgb", target=target, **options)
     assert sc.channel_names[-2:] == ["pi.I", "si.I"]
     ours = sc.render(spp=16, seed=3)
     # prim_index: the same primitive wherever one covers the pixel
@@ -178,6 +179,12 @@ def test_indices_match_mitsuba(mixed, accel, triangulate):
     a cylinder, two instances of a shapegroup (a cube and a sphere), shapes with a `<ref>`'d
     BSDF; with Embree, with the rdsl BVH (instances copied), and triangulated."""
     check(*mixed, SHAPES, 8, accel=accel, triangulate=triangulate)
+
+
+@pytest.mark.skipif(shutil.which("cc") is None, reason="no C compiler (cc) on PATH")
+def test_c_target_matches_mitsuba(mixed):
+    """The C target (the rdsl BVH, compiled by cc) numbers them alike."""
+    check(*mixed, SHAPES, 8, target="c")
 
 
 @pytest.mark.parametrize("accel", ["embree", "bvh"])
