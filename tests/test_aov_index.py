@@ -151,7 +151,7 @@ def check(path: Path, a: np.ndarray, b: np.ndarray, centres: list, shapes: list,
     covers the whole pixel."""
     from rdsl.runtime.render.renderer import load_scene
 
-    sc = load_scene(path, variant="rgb", target=target, **options)
+    sc = load_scene(path, target=target, **{"variant": "rgb", **options})
     assert sc.channel_names[-2:] == ["pi.I", "si.I"]
     ours = sc.render(spp=16, seed=3)
     # prim_index: the same primitive wherever one covers the pixel
@@ -172,13 +172,14 @@ def check(path: Path, a: np.ndarray, b: np.ndarray, centres: list, shapes: list,
     assert set(theirs) == set(range(len(shapes) + 1))  # every shape and the background seen
 
 
-@pytest.mark.parametrize("accel,triangulate", [("embree", False), ("bvh", False),
-                                               ("embree", True)])
-def test_indices_match_mitsuba(mixed, accel, triangulate):
+@pytest.mark.parametrize("accel,triangulate,variant", [
+    ("embree", False, "rgb"), ("bvh", False, "rgb"), ("embree", True, "rgb"),
+    ("embree", False, "spectral")])
+def test_indices_match_mitsuba(mixed, accel, triangulate, variant):
     """Meshes from OBJ and PLY, a rectangle with an area emitter, a cube, a sphere, a disk,
     a cylinder, two instances of a shapegroup (a cube and a sphere), shapes with a `<ref>`'d
-    BSDF; with Embree, with the rdsl BVH (instances copied), and triangulated."""
-    check(*mixed, SHAPES, 8, accel=accel, triangulate=triangulate)
+    BSDF; with Embree, with the rdsl BVH (instances copied), triangulated, and spectral."""
+    check(*mixed, SHAPES, 8, accel=accel, triangulate=triangulate, variant=variant)
 
 
 @pytest.mark.skipif(shutil.which("cc") is None, reason="no C compiler (cc) on PATH")
