@@ -44,6 +44,8 @@ AOV_TYPES: dict[str, tuple[str, ...]] = {
     "albedo": ("R", "G", "B"),
     "dp_du": ("X", "Y", "Z"),
     "dp_dv": ("X", "Y", "Z"),
+    "prim_index": ("I",),
+    "shape_index": ("I",),
 }
 _SUFFIXES = {2: ("U", "V"), 3: ("X", "Y", "Z")}
 POLARIZED_ONLY = ("stokes",)  # Mitsuba refuses these in unpolarized variants
