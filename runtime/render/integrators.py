@@ -30,8 +30,8 @@ from ...compiler.ir import F32, SpectrumType, StructType, Type, VecType
 from ...core.color import ColorModel
 from ...core.scene_spec import Instance
 
-__all__ = ["AOV_TYPES", "AovChannel", "IntegratorPlan", "integrator_instances",
-           "integrator_plan"]
+__all__ = ["AOV_TYPES", "AovChannel", "IntegratorPlan", "has_sample_valid",
+           "integrator_instances", "integrator_plan"]
 
 # Mitsuba's aov types -> the field of stdlib/integrator/aov.rdsl's `Aov`, and the channel
 # suffixes aov.cpp gives them
@@ -115,6 +115,16 @@ def nests(integ: Any) -> bool:
     """Whether the integrator's ``sample`` takes the nested integrator's estimate."""
     params, _ = _decl(integ).signature("sample")
     return len(params) == 4
+
+
+def has_sample_valid(integ: Any) -> bool:
+    """Whether the integrator defines ``sample_valid``: its estimate and whether the sample
+    is valid (Mitsuba's ``valid``, the film's alpha)."""
+    try:
+        _decl(integ).signature("sample_valid")
+    except KeyError:
+        return False
+    return True
 
 
 def aov_struct(integ: Any) -> StructType | None:
