@@ -11,6 +11,13 @@ field of the struct ``A`` becomes channels, in order, named ``field`` (a Float),
 ``field.U``/``.V`` (Vec2), ``field.X``/``.Y``/``.Z`` (Vec3) or ``field.R``/``.G``/``.B``
 (Spectrum).
 
+An integrator may also define ``fn sample_valid(scene, ray, sampler) -> (Spectrum, Bool)``:
+the same estimate and whether the sample is valid (Mitsuba's ``valid``), the alpha of a
+film whose ``pixel_format`` has one (``rgba``, ``xyza``, ``luminance_alpha``).  The kernel
+calls it only for such a film (an rgb film's kernel is unchanged); a wrapper's alpha is its
+nested integrator's, and without ``sample_valid`` the alpha is whether the camera ray hits
+a surface (0 with no radiance integrator: Mitsuba's ``aov`` alone).
+
 Mitsuba's ``aov`` integrator names its channels itself: its ``aovs`` property (``name:type``
 entries) picks fields of ``A`` by type and names them as aov.cpp does (``dd.y:depth`` ->
 ``dd.y.T``, ``nn:sh_normal`` -> ``nn.X``, ``nn.Y``, ``nn.Z``).  Mitsuba's ``stokes``
