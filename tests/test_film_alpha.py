@@ -99,19 +99,24 @@ def assert_colour_matches(ours: np.ndarray, theirs: np.ndarray, what: str) -> No
 
 
 PATH = '<integrator type="path"/>'
+
+
+def path_with(prop: str) -> str:
+    """A `path` integrator with the property ``prop``."""
+    return f'<integrator type="path">{prop}</integrator>'
+
+
 CASES = {  # name -> (integrator, front BSDF, background)
     "path": (PATH, '<bsdf type="diffuse"/>', ""),
     "path.constant": (PATH, '<bsdf type="diffuse"/>', CONSTANT),
     "path.mask": (PATH, MASK, ""),
-    "path.max_depth_2.mask": ('<integrator type="path"><integer name="max_depth" value="2"/>'
-                              '</integrator>', MASK, ""),
+    "path.max_depth_2.mask": (path_with('<integer name="max_depth" value="2"/>'), MASK, ""),
     # Mitsuba 3.9's camera rays pass through hidden area emitters, rdsl's see their
     # surface: the case has none in view
-    "path.hide_emitters.constant": ('<integrator type="path"><boolean name="hide_emitters" '
-                                    'value="true"/></integrator>', MASK, CONSTANT),
-    "path.max_depth_0.constant": ('<integrator type="path"><integer name="max_depth" '
-                                  'value="0"/></integrator>', '<bsdf type="diffuse"/>',
-                                  CONSTANT),
+    "path.hide_emitters.constant": (path_with('<boolean name="hide_emitters" value="true"/>'),
+                                    MASK, CONSTANT),
+    "path.max_depth_0.constant": (path_with('<integer name="max_depth" value="0"/>'),
+                                  '<bsdf type="diffuse"/>', CONSTANT),
     "path.dielectric": (PATH, '<bsdf type="dielectric"/>', ""),
     "direct.constant": ('<integrator type="direct"/>', MASK, CONSTANT),
     "direct": ('<integrator type="direct"/>', '<bsdf type="diffuse"/>', ""),

@@ -133,10 +133,11 @@ def _radiance_call(plan: IntegratorPlan, bufs: SceneBuffers, weight: str | None 
         lines.append("    let L0 = Spectrum(0.0);")
     elif alpha and source is not radiance and has_sample_valid(radiance):
         lines.append(f"    let (L0, valid) = {radiance.type}.sample_valid(scene, ray, sampler);")
+        alpha = False  # `valid` is set
     else:
         out = "(L0, sample_aovs)" if source is radiance else "L0"
         lines.append(f"    let {out} = {radiance.type}.sample(scene, ray, sampler);")
-    if alpha and not lines[-1].startswith("    let (L0, valid)"):
+    if alpha:
         lines.append(_valid_call(radiance))
     if wrapper is None:
         lines.append("    let L = L0;")
