@@ -287,3 +287,17 @@ def test_mono_film_formats_are_mitsubas(tmp_path):
         assert sorted(ours) == sorted(theirs), (fmt, sorted(ours), sorted(theirs))
         if "A" in theirs:
             assert_alpha_matches(ours["A"], theirs["A"], 16, 64, fmt)
+
+
+def test_generic_build_alpha_is_the_specialized_ones(tmp_path):
+    """`--no-specialize` (hide_emitters and max_depth read at run time) gives the same
+    RGBA image, bit for bit."""
+    from rdsl.runtime.render.renderer import load_scene
+
+    path = tmp_path / "scene.xml"
+    path.write_text(scene_xml(path_with('<boolean name="hide_emitters" value="true"/>'),
+                              "rgba", MASK, CONSTANT))
+    images = [load_scene(path, target="host", specialize=s).render(spp=8, seed=1)
+              for s in (True, False)]
+    np.testing.assert_array_equal(images[0], images[1])
+    assert 0.0 < images[0][..., 3].mean() < 1.0
