@@ -303,11 +303,9 @@ def test_generic_build_alpha_is_the_specialized_ones(tmp_path):
     assert 0.0 < images[0][..., 3].mean() < 1.0
 
 
-@pytest.mark.xfail(strict=True, reason="Mitsuba's path returns select(valid_ray, result, 0): "
-                   "light gathered at a mask's surface by a path that then passes through "
-                   "it and leaves the scene is dropped; rdsl keeps it (measured: 4x4 block "
-                   "error 0.17 at 64 and 512 spp on the mask sphere; 0.02 to 0.04 with that "
-                   "select in path.rdsl, which would change rgb images of such scenes)")
 def test_mask_colour_is_mitsubas(tmp_path):
+    """Mitsuba's path returns select(valid_ray, result, 0): light gathered at a mask's surface
+    by a path that then passes through it and leaves the scene is dropped (without it: 4x4
+    block error 0.17 at 64 and 512 spp on the mask sphere)."""
     ours, theirs = render_both(tmp_path, scene_xml(PATH, "rgba", MASK))
     assert_colour_matches(colour(ours, "RGB"), colour(theirs, "RGB"), "mask")
