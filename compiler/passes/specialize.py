@@ -198,12 +198,16 @@ class Specialize(Pass):
         self.report = report if report is not None else []
         self._prm: dict[str, Value] = {}  # placeholder -> its PRM argument, once it reads one
         self._tables = _Tables()
+        # the texture dispatch functions (placeholders and _nested_texture's): built or not
+        self._texture_fns: dict[str, bool] = {}
 
     def run(self, module: Module) -> None:
         for name, (kind, method) in PLACEHOLDERS.items():
             placeholder = module.functions.get(name)
             if placeholder is None:
                 continue
+            if kind == "textures":  # a texture's textures: _nested_texture
+                self._texture_fns[name] = True
             self._dispatch(module, placeholder, kind, method)
         for name, present in ((EMITTER_KIND_PLACEHOLDER, self.scene.emitter_kinds),
                               (SHAPE_KIND_PLACEHOLDER, self.scene.shape_kinds)):
@@ -252,18 +256,19 @@ class Specialize(Pass):
             out.append(ins)
         block.instrs = out
 
-    def _dispatch(self, module: Module, placeholder: Function, kind: str, method: str) -> None:
-        """Dispatch over the plugin *types* of the scene's ``kind`` instances; the parameters
-        of one type's instances are selected by id, so three diffuse materials cost one
-        diffuse call."""
+    def _dispatch(self, module: Module, placeholder: Function, kind: str, method: str,
+                  only: list[int] | None = None) -> None:
+        """Dispatch over the plugin *types* of the scene's ``kind`` instances (those of
+        index in ``only``, if given); the parameters of one type's instances are selected by
+        id, so three diffuse materials cost one diffuse call."""
         instances: list[Instance] = getattr(self.scene, kind)
         if not instances:
             return  # the placeholder's own body stays
         ident, args = placeholder.params[0].value, [p.value for p in placeholder.params[1:]]
         plain = [a for a in args if not isinstance(a.type, BufferType)]
         groups: dict[str, list[int]] = {}
-        for k, inst in enumerate(instances):
-            groups.setdefault(inst.plugin, []).append(k)
+        for k in range(len(instances)) if only is None else only:
+            groups.setdefault(instances[k].plugin, []).append(k)
         body = Block()
         tail: Block | None = None  # built from the last group backwards
         for plugin, ids in reversed(list(groups.items())):
@@ -424,10 +429,11 @@ class Specialize(Pass):
         if not 0 <= index < len(self.scene.textures):
             raise CompileError(f"{what}: texture {index} is not one of the scene's "
                                f"{len(self.scene.textures)} texture(s)")
-        if tex is None or placeholder.name in (TEXTURE_PLACEHOLDER, TEXTURE_PLACEHOLDER_1):
-            why = ("textures of textures are not supported" if tex is not None
-                   else f"`{name}` is not defined (import render.scene)")
-            raise CompileError(f"{what}: cannot evaluate a texture here: {why}")
+        if tex is None:
+            raise CompileError(f"{what}: cannot evaluate a texture here: `{name}` is not "
+                               "defined (import render.scene)")
+        if placeholder.name in self._texture_fns:  # a texture of a texture
+            tex = self._nested_texture(module, tex, index, what)
         ours = {p.value.name: p.value for p in placeholder.params}
         operands = [b.const(index, I32)]
         for p in tex.params[1:]:
@@ -439,6 +445,30 @@ class Specialize(Pass):
                                    f"{p.value.type}`, which `{placeholder.name}` does not have")
             operands.append(v)
         return b.emit(Op.CALL, operands, list(tex.ret_types), {"callee": tex.name}).result
+
+
+    def _nested_texture(self, module: Module, tex: Function, index: int, what: str
+                        ) -> Function:
+        """``{tex}.texture{index}``: the texture placeholder ``tex`` dispatching to texture
+        ``index`` alone, what a texture whose parameter texture ``index`` sets (a
+        checkerboard's colour) calls, rather than ``tex`` itself: the scene's textures nest
+        without cycles (the loader rejects ``<ref>`` cycles), so these calls end, and
+        ``inline`` sees no recursion."""
+        name = f"{tex.name}.texture{index}"
+        fn = module.functions.get(name)
+        if fn is not None:
+            if not self._texture_fns[name]:
+                raise CompileError(f"{what}: texture {index} contains itself (a cycle of "
+                                   "textures)")
+            return fn
+        params = [Param(Value(p.value.type, p.value.name), p.uniform, p.default)
+                  for p in tex.params]
+        fn = Function(name, params, list(tex.ret_types), Block(), tex.loc)
+        module.functions[name] = fn
+        self._texture_fns[name] = False  # being built
+        self._dispatch(module, fn, "textures", PLACEHOLDERS[tex.name][1], only=[index])
+        self._texture_fns[name] = True
+        return fn
 
 
 class _Tables:

@@ -111,6 +111,7 @@ class TextureTable:
         self.instances: list[Instance] = []
         # (id(plugin), usage) -> (plugin, index)
         self._ids: dict[tuple[int, str], tuple[Any, int]] = {}
+        self._building: set[tuple[int, str]] = set()  # keys of instances being built
         # (path, raw, usage) -> (offset, width, height, mean, scale)
         self._images: dict[tuple[str, bool, str], tuple[int, int, int, Any, float]] = {}
         self._texels: list[tuple[np.ndarray, bool]] = []  # (texels, encoded as a colour)
@@ -162,9 +163,20 @@ class TextureTable:
         key = (id(plugin), usage)
         if usage == "scalar":
             needs_eval_1(plugin, what)
+        if key in self._building:  # the loader rejects <ref> cycles; this is a safeguard
+            raise CompileError(f"{what}: texture `{plugin.id or plugin.type}` contains "
+                               "itself (a cycle of textures)", plugin.loc)
         if key not in self._ids:
-            self._ids[key] = (plugin, len(self.instances))
-            self.instances.append(self._instance(plugin, what, usage))
+            # the index is taken before the instance is built: its nested textures (a
+            # checkerboard's colours) are appended after it
+            k = len(self.instances)
+            self._ids[key] = (plugin, k)
+            self.instances.append(Instance(plugin.type))
+            self._building.add(key)
+            try:
+                self.instances[k] = self._instance(plugin, what, usage)
+            finally:
+                self._building.discard(key)
         return TextureRef(self._ids[key][1])
 
     def buffer(self, model: ColorModel = RGB) -> np.ndarray:
@@ -180,8 +192,8 @@ class TextureTable:
         p = plugin.params
         name = plugin.id or plugin.type
         emitted = usage == "emitted"
-        if getattr(plugin, "decl", None) is not None:  # textures of textures: not supported
-            return declared_instance(plugin, None, illuminant=emitted)
+        if getattr(plugin, "decl", None) is not None:  # its textures are nested ones
+            return declared_instance(plugin, self, illuminant=emitted)
         if plugin.type == "mesh_attribute":  # its values: fill_attributes(), once meshes are
             if emitted:
                 raise CompileError(f"{what}: a mesh_attribute texture cannot set emitted "
@@ -202,14 +214,7 @@ class TextureTable:
         params: dict[str, Any] = _uv_rows(p["to_uv"])
         if plugin.type == "checkerboard":
             for c in ("color0", "color1"):
-                rgb = getattr(p[c], "rgb", None)
-                if rgb is None:
-                    raise CompileError(f"checkerboard.{c}: textures of textures are not "
-                                       "supported by the renderer yet", plugin.loc)
-                params[c] = spectrum_value(p[c], f"checkerboard.{c}", illuminant=emitted,
-                                           loc=plugin.loc)
-                params["rgb" + c[-1]] = tuple(float(x) for x in rgb)  # for eval_1
-                params["spectral_mean" + c[-1]] = float(srgb_model_mean(rgb))
+                params.update(self._colour(p[c], f"{name}.{c}", c[-1], usage, plugin.loc))
         else:
             offset, w, h, mean, scale = self._image(p["filename"], bool(p["raw"]), plugin,
                                                     usage)
@@ -218,6 +223,26 @@ class TextureTable:
                           filter=BITMAP_FILTERS[p["filter_type"]],
                           wrap=BITMAP_WRAPS[p["wrap_mode"]], emitted=emitted, scale=scale)
         return Instance(plugin.type, params, name)
+
+    def _colour(self, value: Any, what: str, n: str, usage: str, loc: Any
+                ) -> dict[str, Any]:
+        """A checkerboard's colour ``n`` ("0" or "1"): a constant (its value, and for
+        ``eval_1`` its linear sRGB and spectral mean), or a nested texture, evaluated at the
+        same surface point as Mitsuba's (its own ``to_uv``, not composed with the outer's):
+        a reference for ``eval`` in the colour usages, ``value{n}`` for ``eval_1``."""
+        if getattr(value, "category", None) == "texture":
+            if usage == "scalar":
+                return {f"nested{n}": True, f"value{n}": self.ref(value, what, usage)}
+            return {f"color{n}": self.ref(value, what, usage)}
+        rgb = getattr(value, "rgb", None)
+        if rgb is None:
+            raise CompileError(f"{what}: expected a colour (float, rgb or spectrum) or a "
+                               f"texture, got {getattr(value, 'category', type(value).__name__)}",
+                               loc)
+        return {f"color{n}": spectrum_value(value, what, illuminant=usage == "emitted",
+                                            loc=loc),
+                f"rgb{n}": tuple(float(x) for x in rgb),
+                f"spectral_mean{n}": float(srgb_model_mean(rgb))}
 
     def _volume(self, plugin: Any, usage: str) -> dict[str, Any]:
         """A volume texture's params, its voxels stored (once per volume and usage)."""
