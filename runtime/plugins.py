@@ -333,11 +333,10 @@ def kernel_imports(decls: Iterable[PluginDecl], kernel_dir: Path) -> tuple[list[
 
 
 # a user plugin param's rdsl type -> the XML values it takes (runtime/scene/schema.py kinds);
-# a Float of a BSDF or emitter may be a texture (its one-value lookup, eval_1), a texture's
-# own params may not (textures of textures are not supported)
+# a Float may be a texture (its one-value lookup, eval_1), a texture's own params included
+# (textures nest: runtime/render/textures.py)
 _PARAM_KINDS = {"Float": "ftex", "Int": "integer", "UInt": "integer", "UInt64": "integer",
                 "Bool": "boolean", "Spectrum": "spectrum", "Texture": "color", "Vec3": "vec3"}
-_TEXTURE_PARAM_KINDS = {**_PARAM_KINDS, "Float": "float", "Texture": "spectrum"}
 UV_ROWS = ("to_u", "to_v")  # a texture's `to_uv` transform, as stdlib/texture/common.rdsl
 
 
@@ -347,8 +346,7 @@ def declared_spec(decl: PluginDecl) -> Any:
     declaring ``to_u``/``to_v`` (Vec3) takes Mitsuba's ``to_uv`` transform instead."""
     from .scene.schema import REQUIRED, Param, PluginSpec
 
-    kinds = _TEXTURE_PARAM_KINDS if decl.kind == "texture" else _PARAM_KINDS
-    params = {p.name: Param(kinds.get(p.type, "unset"), REQUIRED if p.default is None else None,
+    params = {p.name: Param(_PARAM_KINDS.get(p.type, "unset"), REQUIRED if p.default is None else None,
                             None, p.type, p.where) for p in decl.params().values()}
     if decl.kind == "texture" and all(params.get(r, Param("")).rdsl_type == "Vec3"
                                       for r in UV_ROWS):

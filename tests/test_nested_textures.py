@@ -157,3 +157,101 @@ def test_nested_opacity_is_mitsubas_within_noise(tmp_path, variant):
         return float(np.sqrt(np.mean((a - ref) ** 2)))
 
     assert rmse(ours) < 1.2 * rmse(theirs), (rmse(ours), rmse(theirs))
+
+
+def test_generic_build_renders_nesting_as_the_specialized_one(tmp_path):
+    """`--no-specialize` reads the nested textures' parameters from its buffer: the same
+    image, sample for sample."""
+    path = tmp_path / "scene.xml"
+    path.write_text(scene_xml(nested_roughness(tmp_path), POINT))
+    a = load_scene(path).render(seed=3)
+    b = load_scene(path, specialize=False).render(seed=3)
+    np.testing.assert_array_equal(a, b)
+
+
+def test_mesh_attribute_in_checker_against_mitsuba(tmp_path):
+    """A PLY mesh's vertex colours as a checkerboard's colour: the attribute's values are
+    stored for the meshes whose BSDF reads it through the checkerboard."""
+    from _plugin_scenes import median_rmse, write_scene
+    from test_mesh_attribute import ply_shape, texture, write_ply
+
+    write_ply(tmp_path / "grid.ply")
+    tex = checker("reflectance", texture("vertex_color", "?"), "0.2, 0.3, 0.9", uv(2, 2))
+    mine, theirs = median_rmse(write_scene(tmp_path, ply_shape(diffuse(tex))), 32)
+    assert mine <= 1.2 * theirs, (mine, theirs)
+
+
+HALVE = """texture halve {
+    param base: Texture = 0.5;
+    fn eval(si: Surface) -> Spectrum { return base(si) * 0.5; }
+    fn eval_1(si: Surface) -> Float { return 0.25; }
+}
+"""
+
+
+def test_textures_of_a_users_texture(tmp_path):
+    """A user's texture plugin with a `Texture` param set by a nested checkerboard, itself
+    nested in a checkerboard, renders as the flat checkerboards of halved colours (halving
+    is exact in rgb: the same image, sample for sample)."""
+    (tmp_path / "halve.rdsl").write_text(HALVE)
+    inner = checker("base", "0.9, 0.1, 0.1", "0.1, 0.8, 0.2", uv(4, 2))
+    nested = checker("reflectance", f'<texture type="halve" name="?">{inner}</texture>',
+                     "0.2, 0.3, 0.9", uv(2, 2))
+    flat_inner = checker("?", "0.45, 0.05, 0.05", "0.05, 0.4, 0.1", uv(4, 2))
+    flat = checker("reflectance", flat_inner, "0.2, 0.3, 0.9", uv(2, 2))
+    images = []
+    for name, tex in (("nested.xml", nested), ("flat.xml", flat)):
+        path = tmp_path / name
+        path.write_text(scene_xml(diffuse(tex), POINT))
+        images.append(load_scene(path).render(seed=3))
+    assert images[1].max() > 0.05
+    np.testing.assert_array_equal(*images)
+
+
+NOT_EVAL_1 = """texture plain {
+    param c: Texture = 0.5;
+    fn eval(si: Surface) -> Spectrum { return c(si); }
+}
+"""
+CYCLE = ('<texture type="checkerboard" id="a"><ref name="color0" id="b"/></texture>\n'
+         '<texture type="checkerboard" id="b">\n<ref name="color1" id="a"/></texture>')
+BAD = {
+    # a <ref> loop through two checkerboards, and one through itself: at the closing <ref>
+    "cycle": ('<bsdf type="diffuse"><ref name="reflectance" id="a"/></bsdf>', CYCLE,
+              'reference cycle texture \'a\' -> texture \'b\' -> texture \'a\'',
+              '<ref name="color1" id="a"/>'),
+    "self": ('<bsdf type="diffuse"><ref name="reflectance" id="a"/></bsdf>',
+             '<texture type="checkerboard" id="a">\n<ref name="color0" id="a"/></texture>',
+             "reference cycle texture 'a' -> texture 'a'", '<ref name="color0" id="a"/>'),
+    # not a texture
+    "bsdf": (diffuse('<texture type="checkerboard" name="reflectance">\n'
+                     '<bsdf type="diffuse" name="color0"/></texture>'), "",
+             "parameter 'color0' of texture 'checkerboard' expects a color", 'name="color0"/>'),
+    # a nested texture that has no one value, where the checkerboard sets a roughness
+    "no_eval_1": (rough('<texture type="checkerboard" name="alpha">\n'
+                        '<texture type="plain" name="color0"/></texture>'), "",
+                  "texture `plain`", '<texture type="plain"'),
+    # a kind that cannot be nested where the checkerboard sets emitted light
+    "emitted": ('<emitter type="area"><texture type="checkerboard" name="radiance">\n'
+                '<texture type="mesh_attribute" name="color0"><string name="name" '
+                'value="vertex_color"/></texture></texture></emitter>', "",
+                "a mesh_attribute texture cannot set emitted light",
+                '<texture type="mesh_attribute"'),
+}
+
+
+@pytest.mark.parametrize("case", list(BAD))
+def test_bad_nesting_is_one_clear_error_at_its_line(tmp_path, case):
+    from rdsl.compiler.diagnostics import CompileError
+    from rdsl.runtime.scene import SceneError
+
+    shape, extra, message, marker = BAD[case]
+    (tmp_path / "plain.rdsl").write_text(NOT_EVAL_1)
+    xml = scene_xml(shape, POINT + extra)
+    line = next(k for k, text in enumerate(xml.splitlines(), 1) if marker in text)
+    path = tmp_path / "scene.xml"
+    path.write_text(xml)
+    with pytest.raises((SceneError, CompileError)) as exc:
+        load_scene(path).render(seed=0)
+    text = str(exc.value)
+    assert message in text and text.startswith(f"{path}:{line}:"), text

@@ -45,7 +45,8 @@ def declared_params(plugin: Any, textures: Any = None, illuminant: bool = False
         if getattr(value, "category", None) == "texture":
             if textures is None:
                 raise CompileError(f"{_where(plugin)}: a texture cannot set `{name}` here "
-                                   "(textures of textures are not supported)", plugin.loc)
+                                   f"(a {plugin.category}'s params take no texture)",
+                                   plugin.loc)
             usage = ("scalar" if rdsl_type == "Float" else "emitted" if illuminant
                      else "colour")
             out[name] = textures.ref(value, what, usage)
