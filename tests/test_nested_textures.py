@@ -285,3 +285,37 @@ def test_bad_nesting_is_one_clear_error_at_its_line(tmp_path, case):
         load_scene(path).render(seed=0)
     text = str(exc.value)
     assert message in text and text.startswith(f"{path}:{line}:"), text
+
+
+def test_load_dict_nests_as_the_xml(tmp_path):
+    """Mitsuba's dict form of a checkerboard in a checkerboard (a nested dict, and a `ref`)
+    renders as the same scene's XML, sample for sample."""
+    import rdsl
+
+    T = rdsl.Transform4f
+    path = tmp_path / "scene.xml"
+    inner_xml = checker("?", "0.9, 0.1, 0.1", "0.1, 0.8, 0.2", uv(4, 2))
+    path.write_text(scene_xml(diffuse(checker("reflectance", inner_xml, "0.2, 0.3, 0.9",
+                                              uv(2, 2))), POINT))
+    inner = {"type": "checkerboard", "id": "inner", "to_uv": T().scale([4, 2, 1]),
+             "color0": {"type": "rgb", "value": [0.9, 0.1, 0.1]},
+             "color1": {"type": "rgb", "value": [0.1, 0.8, 0.2]}}
+    scene = {
+        "type": "scene", "inner": inner,
+        "integrator": {"type": "path", "max_depth": 3},
+        "sensor": {"type": "perspective", "fov": FOV,
+                   "to_world": T.look_at(origin=[0, 0, 4], target=[0, 0, 0], up=[0, 1, 0]),
+                   "sampler": {"type": "independent", "sample_count": 4},
+                   "film": {"type": "hdrfilm", "width": RES, "height": RES,
+                            "rfilter": {"type": "box"}}},
+        "shape": {"type": "rectangle", "bsdf": {"type": "diffuse", "reflectance": {
+            "type": "checkerboard", "to_uv": T().scale([2, 2, 1]),
+            "color0": {"type": "ref", "id": "inner"},
+            "color1": {"type": "rgb", "value": [0.2, 0.3, 0.9]}}}},
+        "light": {"type": "point", "position": [0.7, 0.4, 1.2],
+                  "intensity": {"type": "rgb", "value": [5, 5, 5]}},
+    }
+    a = rdsl.load_dict(scene).render(seed=3)
+    b = load_scene(path).render(seed=3)
+    assert b.max() > 0.05
+    np.testing.assert_array_equal(a, b)
