@@ -346,8 +346,9 @@ def declared_spec(decl: PluginDecl) -> Any:
     declaring ``to_u``/``to_v`` (Vec3) takes Mitsuba's ``to_uv`` transform instead."""
     from .scene.schema import REQUIRED, Param, PluginSpec
 
-    params = {p.name: Param(_PARAM_KINDS.get(p.type, "unset"), REQUIRED if p.default is None else None,
-                            None, p.type, p.where) for p in decl.params().values()}
+    params = {p.name: Param(_PARAM_KINDS.get(p.type, "unset"),
+                            REQUIRED if p.default is None else None, None, p.type, p.where)
+              for p in decl.params().values()}
     if decl.kind == "texture" and all(params.get(r, Param("")).rdsl_type == "Vec3"
                                       for r in UV_ROWS):
         rows = [params.pop(r) for r in UV_ROWS]

@@ -24,10 +24,9 @@ import pytest
 
 pytest.importorskip("rdsl.runtime.embree")
 
-from _mitsuba_render import block_error, mitsuba_variant  # noqa: E402
-
-from rdsl.runtime.render.image import write_exr  # noqa: E402
-from rdsl.runtime.render.renderer import load_scene  # noqa: E402
+from _mitsuba_render import block_error, mitsuba_variant
+from rdsl.runtime.render.image import write_exr
+from rdsl.runtime.render.renderer import load_scene
 
 FOV = 2 * math.degrees(math.atan(1 / 4))  # the rectangle [-1, 1]^2 fills the view from z = 4
 RES = 16
@@ -262,9 +261,9 @@ BAD = {
                         '<texture type="plain" name="color0"/></texture>'), "",
                   "texture `plain`", '<texture type="plain"'),
     # a kind that cannot be nested where the checkerboard sets emitted light
-    "emitted": ('<emitter type="area"><texture type="checkerboard" name="radiance">\n'
+    "emitted": (('<emitter type="area"><texture type="checkerboard" name="radiance">\n'
                 '<texture type="mesh_attribute" name="color0"><string name="name" '
-                'value="vertex_color"/></texture></texture></emitter>', "",
+                'value="vertex_color"/></texture></texture></emitter>'), "",
                 "a mesh_attribute texture cannot set emitted light",
                 '<texture type="mesh_attribute"'),
 }

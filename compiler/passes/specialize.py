@@ -23,7 +23,10 @@ arguments of the same names (``si``, ``T``), whose own dispatch covers the scene
 since a texture param ``reflectance(si)`` evaluates to the param value, evaluating the
 texture at the same ``si`` first is the same thing.  A ``Float`` parameter set by a texture
 (a roughness) becomes ``scene_texture_eval_1(k, ...)`` likewise, the texture's one-value
-lookup (its plugins' ``eval_1``, Mitsuba's).  A method in ``OPTIONAL`` (``disperses``) may
+lookup (its plugins' ``eval_1``, Mitsuba's).  In a texture's own dispatch (a texture of a
+texture: a checkerboard's colour) it becomes ``scene_texture_eval.texture{k}(k, ...)``, the
+dispatch restricted to texture ``k`` (:meth:`Specialize._nested_texture`), so that nesting,
+to any depth, is no recursion.  A method in ``OPTIONAL`` (``disperses``) may
 be missing from a plugin: its instances then give the constant listed there.
 
 A plugin's ``table`` functions (docs/language.md, "Tables") are computed parameters: each
@@ -445,7 +448,6 @@ class Specialize(Pass):
                                    f"{p.value.type}`, which `{placeholder.name}` does not have")
             operands.append(v)
         return b.emit(Op.CALL, operands, list(tex.ret_types), {"callee": tex.name}).result
-
 
     def _nested_texture(self, module: Module, tex: Function, index: int, what: str
                         ) -> Function:

@@ -236,9 +236,9 @@ class TextureTable:
             return {f"color{n}": self.ref(value, what, usage)}
         rgb = getattr(value, "rgb", None)
         if rgb is None:
+            got = getattr(value, "category", type(value).__name__)
             raise CompileError(f"{what}: expected a colour (float, rgb or spectrum) or a "
-                               f"texture, got {getattr(value, 'category', type(value).__name__)}",
-                               loc)
+                               f"texture, got {got}", loc)
         return {f"color{n}": spectrum_value(value, what, illuminant=usage == "emitted",
                                             loc=loc),
                 f"rgb{n}": tuple(float(x) for x in rgb),
