@@ -132,6 +132,18 @@ def volume_in_checker(tmp_path: Path) -> str:
     return diffuse(checker("reflectance", "0.9, 0.1, 0.1", volume, uv(2, 2)))
 
 
+def deep_chain(tmp_path: Path) -> str:
+    """Five checkerboards, each the `color1` of the one before, every one of its own scale
+    (the finest cells still whole pixels)."""
+    colours = ["0.9, 0.1, 0.1", "0.1, 0.8, 0.2", "0.2, 0.3, 0.9", "0.7, 0.7, 0.1",
+               "0.1, 0.6, 0.7"]
+    tex = '<rgb name="?" value="0.5, 0.5, 0.5"/>'
+    for k, c in reversed(list(enumerate(colours))):
+        scale = uv(2 ** (k % 4), 2 ** (3 - k % 4))
+        tex = checker("reflectance" if k == 0 else "?", c, tex, scale)
+    return diffuse(tex)
+
+
 def emitted(tmp_path: Path) -> str:
     """Emitted light (an area emitter's radiance, times D65 in spectral builds) from a
     checkerboard holding a bitmap and a checkerboard (Mitsuba takes their colours as
@@ -143,7 +155,7 @@ def emitted(tmp_path: Path) -> str:
 
 SHARP = {"checker_in_checker": checker_in_checker, "bitmap_in_checker": bitmap_in_checker,
          "volume_in_checker": volume_in_checker, "nested_roughness": nested_roughness,
-         "emitted": emitted}
+         "deep_chain": deep_chain, "emitted": emitted}
 
 
 def render_pair(path: Path, variant: str, spp: int) -> tuple[np.ndarray, np.ndarray]:
