@@ -330,3 +330,23 @@ def test_load_dict_nests_as_the_xml(tmp_path):
     b = load_scene(path).render(seed=3)
     assert b.max() > 0.05
     np.testing.assert_array_equal(a, b)
+
+
+def test_texture_table_refuses_a_cycle_it_is_given():
+    """The loader rejects `<ref>` cycles; objects built another way that contain themselves
+    get an error from the texture table too, not endless recursion."""
+    from types import SimpleNamespace
+
+    from rdsl.compiler.diagnostics import CompileError
+    from rdsl.runtime.render.textures import TextureTable
+
+    def board(ident: str) -> SimpleNamespace:
+        grey = SimpleNamespace(rgb=(0.5, 0.5, 0.5), samples=None)
+        return SimpleNamespace(category="texture", type="checkerboard", id=ident, loc=None,
+                               decl=None, children=[],
+                               params={"to_uv": np.eye(4), "color0": grey, "color1": grey})
+
+    a, b = board("a"), board("b")
+    a.params["color0"], b.params["color1"] = b, a
+    with pytest.raises(CompileError, match="texture `a` contains itself"):
+        TextureTable().ref(a, "diffuse.reflectance")
