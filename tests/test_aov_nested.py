@@ -9,8 +9,15 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from _mitsuba_render import mitsuba_variant
-from test_film_alpha import (CONSTANT, MASK, PATH, assert_alpha_matches,
-                             assert_colour_matches, colour, scene_xml)
+from test_film_alpha import (
+    CONSTANT,
+    MASK,
+    PATH,
+    assert_alpha_matches,
+    assert_colour_matches,
+    colour,
+    scene_xml,
+)
 
 pytest.importorskip("rdsl.runtime.embree")
 

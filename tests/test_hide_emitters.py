@@ -6,7 +6,6 @@ noise-aware, for `path` and `direct`, with hide_emitters true and false."""
 
 from __future__ import annotations
 
-import numpy as np
 import pytest
 from test_film_alpha import assert_alpha_matches, assert_colour_matches, colour, render_both
 
