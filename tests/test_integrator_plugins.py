@@ -87,9 +87,12 @@ def test_ao_corner_matches_closed_form(tmp_path):
                        + _camera("0.55, 0, 2", "0.55, 0, 0", 28, 48, 16, 64))
     scene = rdsl.load_scene(path)
     img = scene.render(seed=3)
-    assert scene.channel_names == ["R", "G", "B", "p.X", "p.Y", "p.Z"]
-    ao, x = img[..., 0], img[..., 3]
-    assert 0.03 < x.min() and x.max() < 1.1 and np.allclose(img[..., 5], 0.0, atol=1e-5)
+    # as Mitsuba's aov: the nested integrator's image (_arg_0.R ... .A), then the AOVs
+    assert scene.channel_names == ["R", "G", "B", "_arg_0.R", "_arg_0.G", "_arg_0.B",
+                                   "_arg_0.A", "p.X", "p.Y", "p.Z"]
+    np.testing.assert_array_equal(img[..., 3:6], img[..., :3])
+    ao, x = img[..., 0], img[..., 7]
+    assert 0.03 < x.min() and x.max() < 1.1 and np.allclose(img[..., 9], 0.0, atol=1e-5)
     a = np.clip(x, 0.0, 1.0)
     expected = 1.0 - (np.arccos(a) - a * np.sqrt(1.0 - a * a)) / np.pi
     col_ao, col_expected = ao.mean(axis=0), expected.mean(axis=0)

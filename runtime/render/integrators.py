@@ -9,7 +9,9 @@ that takes a last argument ``nested: Spectrum`` wraps the integrator nested in i
 first and hands its estimate over.  Whichever returns ``(Spectrum, A)`` gives the AOVs: each
 field of the struct ``A`` becomes channels, in order, named ``field`` (a Float),
 ``field.U``/``.V`` (Vec2), ``field.X``/``.Y``/``.Z`` (Vec3) or ``field.R``/``.G``/``.B``
-(Spectrum).
+(Spectrum).  Mitsuba's ``aov`` also writes its nested integrator's image (colour and alpha)
+before its AOVs, as ``_arg_0.R``, ``.G``, ``.B``, ``.A`` (or under the nested integrator's
+``name``).
 
 An integrator may also define ``fn sample_valid(scene, ray, sampler) -> (Spectrum, Bool)``:
 the same estimate and whether the sample is valid (Mitsuba's ``valid``), the alpha of a
@@ -86,9 +88,24 @@ class IntegratorPlan:
         return next((i for i in (self.wrapper, self.radiance)
                      if i is not None and aov_struct(i) is not None), None)
 
+    @property
+    def nested_image(self) -> str | None:
+        """The name of the nested integrator's image that Mitsuba's ``aov`` writes before
+        its AOVs, as channels ``NAME.R``, ``.G``, ``.B``, ``.A`` (its colour and ``valid``):
+        the nested integrator's ``name`` attribute, else ``_arg_0``; None for other
+        wrappers, a user's, or no nested integrator."""
+        wrapper = self.wrapper
+        if (wrapper is None or wrapper.type != "aov" or getattr(wrapper, "decl", None)
+                is not None or self.radiance is None):
+            return None
+        return (wrapper.params.get("nested_names") or ["_arg_0"])[0]
+
     def aov_channel_names(self) -> list[str]:
-        """The channels after the base ones, as the EXR names them, in film order."""
-        return [n for c in self.aovs for n in c.names]
+        """The channels after the base ones, as the EXR names them, in film order (as
+        aov.cpp: the nested integrator's image, then the AOVs)."""
+        nested = self.nested_image
+        image = [f"{nested}.{c}" for c in "RGBA"] if nested is not None else []
+        return image + [n for c in self.aovs for n in c.names]
 
     def check_variant(self, model: ColorModel) -> None:
         """A ``stokes`` integrator needs a polarized variant: an error at its XML otherwise."""

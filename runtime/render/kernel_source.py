@@ -164,17 +164,25 @@ def _aov_fields(plan: IntegratorPlan, channels: int, spectral: bool = False
     Spectrum AOV as RGB (the one value repeated in mono, sRGB of the sampled wavelengths in
     spectral), a Float, Vec2 or Vec3 one as one Float field per component."""
     fields = []
+    if plan.nested_image is not None:  # aov.cpp's copy of the nested integrator's image
+        fields += [_colour_field("L0", channels, spectral), ("Float", "select(valid, 1.0, 0.0)")]
     for aov in plan.aovs:
         e = f"sample_aovs.{aov.field}"
         if isinstance(aov.type, SpectrumType):
-            fields.append(("Vec3", f"Vec3(mean({e}))") if channels == 1
-                          else ("Vec3", f"to_srgb({e} * wavelength_weight)") if spectral
-                          else ("Spectrum", e))
+            fields.append(_colour_field(e, channels, spectral))
         elif isinstance(aov.type, VecType):
             fields += [("Float", f"{e}.{c}") for c in "xyzw"[:aov.type.n]]
         else:
             fields.append(("Float", e))
     return fields
+
+
+def _colour_field(e: str, channels: int, spectral: bool) -> tuple[str, str]:
+    """(rdsl type, expression) of the Spectrum ``e`` as an RGB film field: the one value
+    repeated in mono, sRGB of the sampled wavelengths in spectral."""
+    return (("Vec3", f"Vec3(mean({e}))") if channels == 1
+            else ("Vec3", f"to_srgb({e} * wavelength_weight)") if spectral
+            else ("Spectrum", e))
 
 
 def _film_holes(film: dict[str, Any]) -> dict[str, str]:
@@ -239,7 +247,8 @@ def kernel_source(desc: Any, bufs: SceneBuffers, bsdfs: list[Instance],
         "aov_values": "".join(f"aov{k}: {e} * k, " for k, (_, e) in enumerate(aov_fields)),
         "camera": literal(sensor_fields, sensor),
         "seed_rng": "\n".join(seed_rng),
-        "radiance": _radiance_call(plan, bufs, sensor_weight, alpha),
+        "radiance": _radiance_call(plan, bufs, sensor_weight,
+                                   alpha or plan.nested_image is not None),
         "sampler_kind": str(sampler_kind(desc.sensor.sampler)),
         **_film_holes(film),
     })

@@ -241,6 +241,7 @@ def rdsl_images(sh: Sheet) -> list[np.ndarray]:
     sheets of one scene (the AOVs of one render) render it once."""
     import tempfile
 
+    from rdsl.runtime.render.integrators import integrator_plan
     from rdsl.runtime.render.renderer import load_scene
 
     if not _TMP:
@@ -249,7 +250,12 @@ def rdsl_images(sh: Sheet) -> list[np.ndarray]:
     key = (path.read_text(), sh.variant, sh.spp)
     if key not in _RENDERS:
         scene = load_scene(path, variant=sh.variant, specialize=specialized())
-        _RENDERS[key] = [scene.render(spp=sh.spp, seed=s) for s in SEEDS]
+        # laid out as mi.render's image: without an aov's copy of its nested integrator's
+        # image, which Mitsuba's film writes to its EXR but leaves out of that tensor
+        nested = integrator_plan(scene.desc.integrator).nested_image
+        keep = [i for i, n in enumerate(scene.channel_names)
+                if nested is None or not n.startswith(f"{nested}.")]
+        _RENDERS[key] = [scene.render(spp=sh.spp, seed=s)[..., keep] for s in SEEDS]
     return [sh.pick(m) for m in _RENDERS[key]]
 
 
