@@ -138,7 +138,7 @@ def test_cbox_backward_tape_equals_recomputation_with_russian_roulette():
 
     for t in (2, 16):  # the bounce loop's state is on the tape: one slot past the cap
         kernel = next(k for k in ad_twin(scene, "reverse", 0, t).compile().manifest[
-            "kernels"] if k["name"] == "render_sample")
+            "kernels"] if k["name"] == "render_sample_loss")
         floats = [p["tape_floats"] for p in kernel["params"] if p["name"] == "ad_tape"]
         assert len(floats) == 1 and floats[0] % (t + 1) == 0 and floats[0] > t + 1
     assert any(np.any(g != 0) for g in got[0].values())
