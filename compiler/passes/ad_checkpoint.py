@@ -9,15 +9,23 @@ iterations beyond and is never read).  The row starts at ``ad_row_tape``; the ke
 the two as arguments after the others (a uniform Float buffer, a varying Int) and the
 manifest's ``tape_floats`` is the row's length.  A loop inside another loop is not taped
 (each outer iteration would overwrite its slots): its adjoint recomputes from the start.
+
+The results of the ray queries of a taped loop's body (``trace``, ``occluded``, in its
+branches too) are stored the same way, after the carried state, so that the adjoint's run of
+iteration k < C loads them instead of tracing the rays again (:meth:`Checkpoints.replay_hits`).
 """
 
 from __future__ import annotations
+
+from collections.abc import Iterator
 
 from ..ir import BOOL, F32, I32, U32, U64, Block, BufferType, Builder, Function, Instr, Op, \
     Param, Value, type_to_json
 
 TAPE, TAPE_ROW = "ad_tape", "ad_row_tape"
 _TYPES = (F32, I32, U32, BOOL, U64)
+_QUERIES = (Op.INTERSECT, Op.OCCLUDED)
+HIT, STORED = "ad.hit", "ad.tape_store"  # a stored ray query's offset; a store of its results
 
 
 class Checkpoints:
@@ -29,6 +37,7 @@ class Checkpoints:
         self.size = 0  # floats per lane
         self.stores: set[int] = set()  # the instructions the primal loops got (their ids)
         self.loops: dict[int, tuple[int, int]] = {}  # a taped loop -> (offset, floats)
+        self.hits: dict[int, tuple[int, int]] = {}  # its ray queries' results: the same
 
     def store(self, block: Block) -> None:
         """Make each counted loop of ``block`` that no loop encloses store its state."""
@@ -51,6 +60,61 @@ class Checkpoints:
             body.instrs[:0] = tb.block.instrs
             self.loops[id(ins)] = (self.size, len(floats))
             self.size += (self.cap + 1) * len(floats)
+            queries = list(_queries(body))
+            if queries and all(r.type in _TYPES for _, q in queries for r in q.results):
+                self._store_hits(ins, queries, slot)
+
+    def _store_hits(self, loop: Instr, queries: list[tuple[Block, Instr]],
+                    slot: Value) -> None:
+        """After each ray query of ``loop``'s body, store its results in slot ``slot``."""
+        at = 0
+        for _, q in queries:
+            q.attrs[HIT] = at
+            at += sum(2 if r.type == U64 else 1 for r in q.results)
+        offset, size = self.size, at
+        for block, q in queries:
+            tb = Builder(Block(), q.loc)
+            floats = [x for r in q.results for x in _pack(r, tb)]
+            for x, idx in zip(floats, self._slot(slot, size, offset + q.attrs[HIT], tb,
+                                                 len(floats))):
+                tb.emit(Op.STORE, [self.buf, idx, x], [], {STORED: True})
+            k = next(i for i, x in enumerate(block.instrs) if x is q)
+            block.instrs[k + 1:k + 1] = tb.block.instrs
+        self.hits[id(loop)] = (offset, size)
+        self.size += (self.cap + 1) * size
+
+    def replay_hits(self, loop: Instr, block: Block, k: Value) -> None:
+        """In the adjoint's copy of iteration ``k`` of ``loop``'s body (``block``): each
+        stored ray query becomes ``if k < C`` its results loaded, else the query."""
+        if id(loop) not in self.hits:
+            return
+        offset, size = self.hits[id(loop)]
+        out: list[Instr] = []
+        for ins in block.instrs:
+            if ins.op is not Op.LOOP:
+                for r in ins.regions:
+                    self.replay_hits(loop, r, k)
+            at = ins.attrs.pop(HIT, None)
+            if at is None:
+                out.append(ins)
+                continue
+            b = Builder(Block(), ins.loc)
+            cond = b.op(Op.LT, BOOL, k, b.const(self.cap, I32))
+            then, other = Block(), Block()
+            tb = Builder(then, ins.loc)
+            n = sum(2 if r.type == U64 else 1 for r in ins.results)
+            xs = iter([tb.op(Op.LOAD, F32, self.buf, i)
+                       for i in self._slot(k, size, offset + at, tb, n)])
+            tb.yield_(*[_unpack(xs, r.type, tb) for r in ins.results])
+            ob = Builder(other, ins.loc)
+            ob.yield_(*ob.emit(ins.op, ins.operands, [r.type for r in ins.results],
+                               ins.attrs).results)
+            choice = Instr(Op.IF, [cond], [], regions=[then, other], loc=ins.loc)
+            choice.results = ins.results
+            for r in choice.results:
+                r.owner = choice
+            out += [*b.block.instrs, choice]
+        block.instrs = out
 
     def load(self, ins: Instr, k: Value, b: Builder) -> tuple[list[Value], Value] | None:
         """For taped loop ``ins``: its carried values at checkpoint c = min(k, C - 1) and
@@ -74,11 +138,25 @@ class Checkpoints:
                 {"name": TAPE_ROW, "type": {"kind": "scalar", "dtype": "i32"},
                  "uniform": False, "default": None, "leaves": [TAPE_ROW]}]
 
-    def _slot(self, slot: Value, size: int, offset: int, b: Builder) -> list[Value]:
-        """The tape indices of the ``size`` values of slot ``slot`` of a loop's part."""
+    def _slot(self, slot: Value, size: int, offset: int, b: Builder,
+              count: int | None = None) -> list[Value]:
+        """The tape indices of the first ``count`` (all ``size``) values of slot ``slot``
+        of a loop's part."""
         base = b.op(Op.ADD, I32, self.row, b.op(Op.ADD, I32, b.op(
             Op.MUL, I32, slot, b.const(size, I32)), b.const(offset, I32)))
-        return [base, *[b.op(Op.ADD, I32, base, b.const(j, I32)) for j in range(1, size)]]
+        return [base, *[b.op(Op.ADD, I32, base, b.const(j, I32))
+                        for j in range(1, size if count is None else count)]]
+
+
+def _queries(block: Block) -> Iterator[tuple[Block, Instr]]:
+    """The ray queries of ``block`` and its branches (not those of inner loops), each with
+    the block that holds it."""
+    for ins in block.instrs:
+        if ins.op in _QUERIES:
+            yield block, ins
+        elif ins.op is not Op.LOOP:
+            for r in ins.regions:
+                yield from _queries(r)
 
 
 def _pack(v: Value, b: Builder) -> list[Value]:
