@@ -10,9 +10,10 @@ the two as arguments after the others (a uniform Float buffer, a varying Int) an
 manifest's ``tape_floats`` is the row's length.  A loop inside another loop is not taped
 (each outer iteration would overwrite its slots): its adjoint recomputes from the start.
 
-The results of the ray queries of a taped loop's body (``trace``, ``occluded``, in its
-branches too) are stored the same way, after the carried state, so that the adjoint's run of
-iteration k < C loads them instead of tracing the rays again (:meth:`Checkpoints.replay_hits`).
+The values the adjoint's sweep of an iteration reads from its run of the body forward (its
+intermediate values: partial derivatives, branch conditions, scatter indices) are stored
+the same way, after the carried state, so that the adjoint's iteration k < C loads them
+instead of running the body forward again (:meth:`Checkpoints.keep`); beyond C it runs it.
 """
 
 from __future__ import annotations
@@ -24,8 +25,7 @@ from ..ir import BOOL, F32, I32, U32, U64, Block, BufferType, Builder, Function,
 
 TAPE, TAPE_ROW = "ad_tape", "ad_row_tape"
 _TYPES = (F32, I32, U32, BOOL, U64)
-_QUERIES = (Op.INTERSECT, Op.OCCLUDED)
-HIT, STORED = "ad.hit", "ad.tape_store"  # a stored ray query's offset; a store of its results
+
 
 
 class Checkpoints:
@@ -37,7 +37,7 @@ class Checkpoints:
         self.size = 0  # floats per lane
         self.stores: set[int] = set()  # the instructions the primal loops got (their ids)
         self.loops: dict[int, tuple[int, int]] = {}  # a taped loop -> (offset, floats)
-        self.hits: dict[int, tuple[int, int]] = {}  # its ray queries' results: the same
+        self.slots: dict[int, Value] = {}  # a taped loop -> its slot, in its body
 
     def store(self, block: Block) -> None:
         """Make each counted loop of ``block`` that no loop encloses store its state."""
@@ -60,61 +60,7 @@ class Checkpoints:
             body.instrs[:0] = tb.block.instrs
             self.loops[id(ins)] = (self.size, len(floats))
             self.size += (self.cap + 1) * len(floats)
-            queries = list(_queries(body))
-            if queries and all(r.type in _TYPES for _, q in queries for r in q.results):
-                self._store_hits(ins, queries, slot)
-
-    def _store_hits(self, loop: Instr, queries: list[tuple[Block, Instr]],
-                    slot: Value) -> None:
-        """After each ray query of ``loop``'s body, store its results in slot ``slot``."""
-        at = 0
-        for _, q in queries:
-            q.attrs[HIT] = at
-            at += sum(2 if r.type == U64 else 1 for r in q.results)
-        offset, size = self.size, at
-        for block, q in queries:
-            tb = Builder(Block(), q.loc)
-            floats = [x for r in q.results for x in _pack(r, tb)]
-            for x, idx in zip(floats, self._slot(slot, size, offset + q.attrs[HIT], tb,
-                                                 len(floats))):
-                tb.emit(Op.STORE, [self.buf, idx, x], [], {STORED: True})
-            k = next(i for i, x in enumerate(block.instrs) if x is q)
-            block.instrs[k + 1:k + 1] = tb.block.instrs
-        self.hits[id(loop)] = (offset, size)
-        self.size += (self.cap + 1) * size
-
-    def replay_hits(self, loop: Instr, block: Block, k: Value) -> None:
-        """In the adjoint's copy of iteration ``k`` of ``loop``'s body (``block``): each
-        stored ray query becomes ``if k < C`` its results loaded, else the query."""
-        if id(loop) not in self.hits:
-            return
-        offset, size = self.hits[id(loop)]
-        out: list[Instr] = []
-        for ins in block.instrs:
-            if ins.op is not Op.LOOP:
-                for r in ins.regions:
-                    self.replay_hits(loop, r, k)
-            at = ins.attrs.pop(HIT, None)
-            if at is None:
-                out.append(ins)
-                continue
-            b = Builder(Block(), ins.loc)
-            cond = b.op(Op.LT, BOOL, k, b.const(self.cap, I32))
-            then, other = Block(), Block()
-            tb = Builder(then, ins.loc)
-            n = sum(2 if r.type == U64 else 1 for r in ins.results)
-            xs = iter([tb.op(Op.LOAD, F32, self.buf, i)
-                       for i in self._slot(k, size, offset + at, tb, n)])
-            tb.yield_(*[_unpack(xs, r.type, tb) for r in ins.results])
-            ob = Builder(other, ins.loc)
-            ob.yield_(*ob.emit(ins.op, ins.operands, [r.type for r in ins.results],
-                               ins.attrs).results)
-            choice = Instr(Op.IF, [cond], [], regions=[then, other], loc=ins.loc)
-            choice.results = ins.results
-            for r in choice.results:
-                r.owner = choice
-            out += [*b.block.instrs, choice]
-        block.instrs = out
+            self.slots[id(ins)] = slot
 
     def load(self, ins: Instr, k: Value, b: Builder) -> tuple[list[Value], Value] | None:
         """For taped loop ``ins``: its carried values at checkpoint c = min(k, C - 1) and
@@ -127,6 +73,42 @@ class Checkpoints:
         xs = iter([b.op(Op.LOAD, F32, self.buf, i) for i in self._slot(c, size, offset, b)])
         state = [_unpack(xs, a.type, b) for a in ins.regions[0].args[:-1]]
         return [*state, c], b.op(Op.SUB, I32, k, c)
+
+    def keep(self, loop: Instr, block: Block, new: list[Instr], k: Value,
+             origin: dict[Value, Value]) -> None:
+        """Tape the values the sweep of ``loop``'s adjoint reads from its copy of the body:
+        the primal body stores them (slot min(n, C)), and the adjoint's iteration k < C
+        loads them instead of running the body forward again (``new``: the copy's
+        instructions in ``block``, the rest of ``block`` its sweep; ``origin``: a copied
+        value -> the primal's)."""
+        if id(loop) not in self.slots or not new:
+            return
+        start = next(i for i, x in enumerate(block.instrs) if x is new[0])
+        sweep = block.instrs[start + len(new):]
+        made = {r for i in new for r in i.results}
+        used = list(dict.fromkeys(v for i in sweep for v in _operands(i) if v in made))
+        if not used or any(v.type not in _TYPES or v not in origin for v in used):
+            return
+        body = loop.regions[0]
+        end = body.instrs.pop()
+        pb = Builder(body, end.loc)
+        floats = [x for v in used for x in _pack(origin[v], pb)]
+        offset, size = self.size, len(floats)
+        for x, idx in zip(floats, self._slot(self.slots[id(loop)], size, offset, pb)):
+            pb.emit(Op.STORE, [self.buf, idx, x], [])
+        body.instrs.append(end)
+        self.size += (self.cap + 1) * size
+        b = Builder(Block(), loop.loc)
+        cond = b.op(Op.LT, BOOL, k, b.const(self.cap, I32))
+        then, other = Block(), Block()
+        tb = Builder(then, loop.loc)
+        xs = iter([tb.op(Op.LOAD, F32, self.buf, i) for i in self._slot(k, size, offset, tb)])
+        tb.yield_(*[_unpack(xs, v.type, tb) for v in used])
+        other.instrs = list(new)
+        Builder(other, loop.loc).yield_(*used)
+        choice = b.emit(Op.IF, [cond], [v.type for v in used], regions=[then, other])
+        _replace(sweep, dict(zip(used, choice.results)))
+        block.instrs = [*block.instrs[:start], *b.block.instrs, *sweep]
 
     def add_params(self, fn: Function) -> list[dict]:
         """Give ``fn`` the tape's arguments, if it has a tape; their ABI entries."""
@@ -148,15 +130,20 @@ class Checkpoints:
                         for j in range(1, size if count is None else count)]]
 
 
-def _queries(block: Block) -> Iterator[tuple[Block, Instr]]:
-    """The ray queries of ``block`` and its branches (not those of inner loops), each with
-    the block that holds it."""
-    for ins in block.instrs:
-        if ins.op in _QUERIES:
-            yield block, ins
-        elif ins.op is not Op.LOOP:
-            for r in ins.regions:
-                yield from _queries(r)
+def _operands(ins: Instr) -> Iterator[Value]:
+    """The values ``ins`` reads, in its regions too."""
+    yield from ins.operands
+    for r in ins.regions:
+        for i in r.instrs:
+            yield from _operands(i)
+
+
+def _replace(instrs: list[Instr], new: dict[Value, Value]) -> None:
+    """Read ``new[v]`` for each ``v`` in ``instrs`` and their regions."""
+    for ins in instrs:
+        ins.operands = [new.get(v, v) for v in ins.operands]
+        for r in ins.regions:
+            _replace(r.instrs, new)
 
 
 def _pack(v: Value, b: Builder) -> list[Value]:

@@ -56,7 +56,7 @@ from ..ir import (
     replace_uses,
 )
 from . import Pass, register
-from .ad_checkpoint import HIT, STORED, Checkpoints
+from .ad_checkpoint import Checkpoints
 from .ad_forward import PARAM_BUFFER
 
 GRAD_BUFFER, ROW = "gPRM", "ad_row"
@@ -145,7 +145,6 @@ class _Reverse:
         for ins in fn.walk():
             ins.attrs.pop("ad.counted", None)
             ins.attrs.pop("ad.export", None)
-            ins.attrs.pop(HIT, None)
 
     def _abi_results(self, seeds: list[Param]) -> None:
         fn = self.fn
@@ -303,7 +302,7 @@ class _Reverse:
         m.update(zip(block.args, args))
         tmp = Block()
         tmp.instrs = [i for i in block.instrs[:-1] if id(i) not in self.tape.stores]
-        new = _without_tape_stores(clone_block(tmp, m)).instrs
+        new = clone_block(tmp, m).instrs
         b.block.instrs += new
         for old, v in m.items():
             if old in self.varied:
@@ -315,19 +314,12 @@ class _Reverse:
                 self.rules[v] = ([m.get(x, x) for x in xs], [m.get(p, p) for p in ps])
         return new, m
 
-    def region(self, block: Block, args: list[Value], seeds: dict[int, Value], b: Builder,
-               at: tuple[Instr, Value] | None = None
-               ) -> tuple[dict[Value, Value], dict[Value, Value], set[Value]]:
+    def region(self, block: Block, args: list[Value], seeds: dict[int, Value], b: Builder
+               ) -> tuple[dict[Value, Value], dict[Value, Value], set[Value], list[Instr]]:
         """Recompute ``block`` into ``b`` and sweep it, seeded with the adjoints of its
-        yielded values (index -> adjoint): (adjoints, mapping, values defined there).
-        ``at``: the body of this loop at iteration k, whose ray queries the tape holds."""
-        mark = len(b.block.instrs)
+        yielded values (index -> adjoint): (adjoints, mapping, values defined there, the
+        recomputing instructions)."""
         new, m = self.clone_into(block, args, b)
-        if at is not None:  # the ray queries' results come from the tape where it has them
-            copy = Block()
-            copy.instrs = new
-            self.tape.replay_hits(at[0], copy, at[1])
-            b.block.instrs[mark:] = new = copy.instrs
         y = block.instrs[-1].operands
         local: dict[Value, Value] = {}
         mark = len(b.block.instrs)
@@ -336,7 +328,7 @@ class _Reverse:
         self.sweep(new, local, b)
         _mark_sweep(b.block, mark)
         defined = {r for ins in new for r in _defined(ins)}
-        return local, m, defined
+        return local, m, defined, new
 
     def if_(self, ins: Instr, adj: dict[Value, Value], b: Builder) -> None:
         seeds = {i: adj.pop(r) for i, r in enumerate(ins.results) if r in adj}
@@ -390,8 +382,8 @@ class _Reverse:
         rb = Builder(ab, ins.loc)
         state = self._state_at(ins, k, rb)
         self.varied.update(state[i] for i in hot)
-        local, _, defined = self.region(
-            body, state, {1 + i: a for i, a in zip(hot, ads)}, rb, (ins, k))
+        local, m, defined, fwd = self.region(
+            body, state, {1 + i: a for i, a in zip(hot, ads)}, rb)
         carried = set(state)
         free = [v for v in local if v not in defined and v not in carried]
         sums = [Value(F32, "ad.sum") for _ in free]
@@ -407,6 +399,8 @@ class _Reverse:
         new = b.emit(Op.LOOP, [first, *[seeds.get(i) or zero for i in hot],
                                *[zero] * len(free)],
                      [I32, *[F32] * (len(hot) + len(free))], regions=[ab])
+        # a taped loop: iteration k < C loads what its sweep reads instead of running fwd
+        self.tape.keep(ins, ab, fwd, k, {c: o for o, c in m.items()})
         res = new.results[1:]
         for i, r in zip(hot, res):
             self.acc(adj, init[i], r, b)
@@ -512,16 +506,6 @@ def zero_guard(b: Builder, a: Value, p: Value) -> Value:
 
 def _zero(t) -> object:
     return 0.0 if t == F32 else False if t == BOOL else 0
-
-
-def _without_tape_stores(block: Block) -> Block:
-    """``block`` without the stores of ray query results (``Checkpoints``), in its branches
-    too: a copy of the body recomputes, and the tape already holds them."""
-    block.instrs = [i for i in block.instrs if not i.attrs.get(STORED)]
-    for i in block.instrs:
-        for r in i.regions:
-            _without_tape_stores(r)
-    return block
 
 
 def _mark_sweep(block: Block, start: int) -> None:
