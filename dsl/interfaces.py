@@ -4,7 +4,7 @@ signatures.  :func:`check_integrator` checks an integrator's ``sample``, whose s
 
 from __future__ import annotations
 
-from ..compiler.ir import F32, SPECTRUM, StructType, TupleType, VecType
+from ..compiler.ir import BOOL, F32, SPECTRUM, StructType, TupleType, VecType
 from .program import PluginInfo
 from .types import err, quoted
 
@@ -21,6 +21,8 @@ PLUGIN_INTERFACES: dict[str, list[tuple[str, list[tuple[str, str]], str]]] = {
     "integrator": [],
 }
 INTEGRATOR_SAMPLE = "fn sample(scene: Scene, ray: Ray, sampler: Sampler) -> Spectrum"
+INTEGRATOR_VALID = ("fn sample_valid(scene: Scene, ray: Ray, sampler: Sampler) "
+                    "-> (Spectrum, Bool)")
 AOV_FIELD_TYPES = "`Float`, `Vec2`, `Vec3` or `Spectrum`"
 
 
@@ -53,3 +55,13 @@ def check_integrator(pl: PluginInfo, structs: dict[str, StructType]) -> None:
                                                  and ftype.elem == F32 and ftype.n < 4)):
                 raise err(f"AOV field `{aovs.name}.{fname}` of `{pl.name}.sample` has type "
                           f"{quoted(ftype)}; an AOV is {AOV_FIELD_TYPES}", fn.decl.loc)
+    _check_sample_valid(pl, want)
+
+
+def _check_sample_valid(pl: PluginInfo, want: list) -> None:
+    """The optional ``sample_valid``: the estimate and whether the sample is valid (the
+    film's alpha, Mitsuba's ``valid`` of ``SamplingIntegrator::sample``)."""
+    fn = pl.fns.get("sample_valid")
+    if fn is not None and (fn.param_types != want or fn.ret != TupleType((SPECTRUM, BOOL))):
+        raise err(f"`{pl.name}.sample_valid` has the wrong signature: expected "
+                  f"`{INTEGRATOR_VALID}`, found `{fn.signature()}`", fn.decl.loc)

@@ -11,12 +11,34 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["FILTERS", "border_size", "develop", "film_uniforms", "filter_radius",
-           "new_accumulator"]
+__all__ = ["FILTERS", "PIXEL_FORMATS", "border_size", "colour_image", "develop", "film_format",
+           "film_uniforms", "filter_radius", "new_accumulator"]
 
 # rfilter type -> the kind id of film.rdsl (filter_box ... filter_lanczos); Mitsuba's
 # catmullrom is its mitchell with B = 0, C = 1/2
 FILTERS = {"box": 0, "tent": 1, "gaussian": 2, "mitchell": 3, "catmullrom": 3, "lanczos": 4}
+
+
+# hdrfilm's pixel_format -> (the colour it writes, whether it writes alpha); the colour's
+# channels as the EXR names them
+PIXEL_FORMATS = {"rgb": ("rgb", False), "rgba": ("rgb", True), "xyz": ("xyz", False),
+                 "xyza": ("xyz", True), "luminance": ("luminance", False),
+                 "luminance_alpha": ("luminance", True)}
+COLOUR_CHANNELS = {"rgb": ["R", "G", "B"], "xyz": ["X", "Y", "Z"], "luminance": ["Y"]}
+# Mitsuba's srgb_to_xyz (linear sRGB primaries, D65 white); its second row is `luminance`
+SRGB_TO_XYZ = np.array([[0.412453, 0.357580, 0.180423],
+                        [0.212671, 0.715160, 0.072169],
+                        [0.019334, 0.119193, 0.950227]])
+
+
+def film_format(film: Any, mono: bool = False) -> tuple[str, bool]:
+    """(colour, alpha) of the film's ``pixel_format``.  As Mitsuba's, a mono variant's film
+    writes luminance, with alpha only for ``luminance_alpha`` (it warns and drops the alpha
+    of ``rgba`` and ``xyza``)."""
+    colour, alpha = PIXEL_FORMATS[film.params.get("pixel_format", "rgb")]
+    if mono:
+        return "luminance", alpha and colour == "luminance"
+    return colour, alpha
 
 
 def _filter_params(rfilter: Any) -> tuple[float, float]:
@@ -85,26 +107,19 @@ def develop(acc: np.ndarray, film: dict[str, Any]) -> np.ndarray:
     return (a[..., :c] / np.where(w == 0, np.float32(1), w)).astype(np.float32)
 
 
-def luminance_image(img: np.ndarray) -> np.ndarray:
-    """A developed image's R, G, B (its first three channels) as their luminance Y (the
-    linear sRGB primaries' Y, Mitsuba's ``luminance``), the other channels after it: an
-    hdrfilm's ``pixel_format`` luminance.  The filter is linear, so this equals the
-    filtered luminance of the samples."""
-    y = img[..., 0] * 0.212671 + img[..., 1] * 0.715160 + img[..., 2] * 0.072169
-    return np.concatenate([y[..., None], img[..., 3:]], -1).astype(np.float32)
+def colour_image(img: np.ndarray, colour: str) -> np.ndarray:
+    """A developed image's R, G, B (its first three channels) in the film's ``colour``:
+    kept (rgb), as CIE XYZ (Mitsuba's ``srgb_to_xyz``) or as their luminance Y (its Y row),
+    the other channels after them, as Mitsuba's film develops them.  The filter is linear,
+    so this equals the filtered colour of the samples."""
+    if colour == "rgb":
+        return img
+    rows = SRGB_TO_XYZ if colour == "xyz" else SRGB_TO_XYZ[1:2]
+    c = sum(img[..., k, None] * rows[:, k].astype(np.float32) for k in range(3))
+    return np.concatenate([c, img[..., 3:]], -1).astype(np.float32)
 
 
 def film_reach(film: dict[str, Any]) -> int:
     """Columns (rows) a sample reaches on each side of its cell (as `film_reach` in rdsl)."""
     radius = _radius(film["filter"], film["filter_param"])
     return int(np.ceil(np.float32(radius) + np.float32(0.5))) - 1
-
-
-def sample_weights(out: dict[str, Any], n: int, cells: int) -> tuple[np.ndarray, np.ndarray]:
-    """The samples' column and row filter weights from ``render_sample``'s outputs ``w*``,
-    (samples per cell, cells, 2n+1) each (a batch is sample-major: sample j is in cell
-    j % cells); copies."""
-    m = 2 * n + 1
-    wx = np.stack([np.asarray(out[f"w{k}"], np.float32) for k in range(m)], -1)
-    wy = np.stack([np.asarray(out[f"w{m + k}"], np.float32) for k in range(m)], -1)
-    return wx.reshape(-1, cells, m), wy.reshape(-1, cells, m)

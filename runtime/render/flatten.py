@@ -28,7 +28,15 @@ from .declared import declared_instance
 from .emitters import EmitterTables, emitter_tables
 from .measured import check_measured_variant
 from .shapes import FLAGS as SHAPE_FLAGS
-from .shapes import INSTANCED, instance_record, shape_record, user_geometry
+from .shapes import (
+    INSTANCED,
+    instance_record,
+    mitsuba_numbers,
+    one_prim,
+    sdf_voxel_ranks,
+    shape_record,
+    user_geometry,
+)
 from .shapes import KINDS as SHAPE_KINDS
 from .textures import TextureTable
 
@@ -161,11 +169,15 @@ class _Flattener:
             analytic = None
         if analytic is not None:  # G's first entry is set by finish(), with the records
             self.items.append(user_geometry(analytic))
-            self.records.append((row, 0, shape_record(analytic)))
+            record = shape_record(analytic)
+            if analytic.kind == "sdfgrid":  # then Mitsuba's numbers of its voxels
+                record = np.r_[record, sdf_voxel_ranks(analytic.grid)]
+            self.records.append((row, 0, record))
             if emitter >= 0:
                 self.lights.append((-1, row, analytic.area))
                 self.analytic[row] = analytic
-            self.G.append(np.array([-1, bsdf, emitter, SHAPE_FLAGS[analytic.kind]], np.int32))
+            flags = SHAPE_FLAGS[analytic.kind] | one_prim(shape)
+            self.G.append(np.array([-1, bsdf, emitter, flags], np.int32))
             return
         first = self.nt
         v, f, flags = self.triangles(shape.mesh)
@@ -176,7 +188,7 @@ class _Flattener:
             areas = 0.5 * np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]),
                                          axis=1)
             self.lights += [(first + i, row, float(a)) for i, a in enumerate(areas)]
-        self.G.append(np.array([first, bsdf, emitter, flags], np.int32))
+        self.G.append(np.array([first, bsdf, emitter, flags | one_prim(shape)], np.int32))
 
     def instance(self, shape: Any) -> None:
         """One G entry per mesh of the shapegroup and a record of the transform; the group's
@@ -189,7 +201,8 @@ class _Flattener:
                 v, f, flags = self.triangles(child.mesh)
                 self.tri_meshes.append((first, child.mesh, child.bsdf))
                 parts.append((v, f))
-                entries.append((first, self.bsdf_id(child.bsdf), flags | INSTANCED))
+                entries.append((first, self.bsdf_id(child.bsdf),
+                                flags | INSTANCED | one_prim(child)))
             self.groups[id(group)] = (EmbreeGroup(parts), entries)
         embree_group, entries = self.groups[id(group)]
         if not entries:
@@ -281,7 +294,9 @@ def flatten(desc: Any, triangulate: bool = False, model: ColorModel = RGB,
         _check_copies(desc.shapes)
     check_measured_variant(scene_bsdfs(desc), model)
     fl = _Flattener(model)
+    numbers = mitsuba_numbers(desc.shapes)
     for shape_index, shape in enumerate(desc.shapes):
+        first_row = len(fl.G)
         if shape.type != "instance":
             fl.shape(shape_index, shape, triangulate)
         elif instancing:
@@ -289,4 +304,6 @@ def flatten(desc: Any, triangulate: bool = False, model: ColorModel = RGB,
         else:
             for copy in world_copies(shape):
                 fl.shape(shape_index, copy, triangulate)
+        for row in fl.G[first_row:]:  # Mitsuba's numbers of the shape, in G's high flags
+            row[3] |= numbers[shape_index]
     return fl.finish(desc), fl.bsdfs, fl.emitters

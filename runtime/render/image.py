@@ -49,17 +49,19 @@ def _channel_names(prefix: str, c: int) -> list[str]:
     return [f"{prefix}.{n}" if prefix else n for n in names]
 
 
-def write_exr(path: str | Path, img: Any, extra: dict[str, Any] | None = None) -> None:
+def write_exr(path: str | Path, img: Any, extra: dict[str, Any] | None = None,
+              with_base: bool = True) -> None:
     """Write ``img`` ((H, W, 3) RGB, (H, W, 4) RGBA or (H, W) luminance) as float32 OpenEXR.
 
     ``extra`` adds more layers, name -> (H, W) or (H, W, C) array: a 2-D array becomes one
     channel ``name``, a 3- or 4-channel one ``name.R``, ``name.G``, ``name.B`` (``name.A``),
-    any other ``name.0``, ``name.1``, ... (AOVs, Stokes components)."""
+    any other ``name.0``, ``name.1``, ... (AOVs, Stokes components).  ``with_base=False``
+    writes only the layers (``img`` gives the size)."""
     exr = _openexr()
     base = _as_hwc(img, "write_exr")
     h, w = base.shape[:2]
     channels: dict[str, np.ndarray] = {}
-    layers = [("", base)] + [(k, _as_hwc(v, f"write_exr (layer {k!r})"))
+    layers = [("", base)] * with_base + [(k, _as_hwc(v, f"write_exr (layer {k!r})"))
                              for k, v in (extra or {}).items()]
     for prefix, a in layers:
         if a.shape[:2] != (h, w):
@@ -140,15 +142,17 @@ def write_image(path: str | Path, img: Any, **kwargs: Any) -> None:
 
 
 def write_render(exr: Path, img: np.ndarray, channel_names: list[str]) -> Path:
-    """Write a render as ``exr`` (radiance, then one channel per AOV: ``channel_names``
-    past the first one or three) and a tonemapped PNG beside it, which it returns.  Each
-    file is written under a temporary name in its folder and renamed over the old one, so
-    a viewer that reloads the image never reads half of it."""
+    """Write a render as ``exr``, each channel under its name in ``channel_names`` (the
+    colour: R, G, B, X, Y, Z or Y; A; the AOVs), and a tonemapped PNG of its colour (grey
+    Y for XYZ or luminance) beside it, which it returns.  Each file is written under a
+    temporary name in its folder and renamed over the old one, so a viewer that reloads
+    the image never reads half of it."""
     png = exr.with_suffix(".png")
-    base = 1 if channel_names[0] == "Y" else 3
-    aovs = {n: img[..., i] for i, n in enumerate(channel_names) if i >= base}
-    _replace(exr, lambda tmp: write_exr(tmp, img[..., :base], extra=aovs))
-    _replace(png, lambda tmp: write_png(tmp, img[..., :base]))
+    layers = {n: img[..., i] for i, n in enumerate(channel_names)}
+    rgb = channel_names[:3] == ["R", "G", "B"]
+    first = 0 if rgb else channel_names.index("Y")
+    _replace(exr, lambda tmp: write_exr(tmp, img, extra=layers, with_base=False))
+    _replace(png, lambda tmp: write_png(tmp, img[..., first:first + (3 if rgb else 1)]))
     return png
 
 

@@ -11,6 +11,13 @@ field of the struct ``A`` becomes channels, in order, named ``field`` (a Float),
 ``field.U``/``.V`` (Vec2), ``field.X``/``.Y``/``.Z`` (Vec3) or ``field.R``/``.G``/``.B``
 (Spectrum).
 
+An integrator may also define ``fn sample_valid(scene, ray, sampler) -> (Spectrum, Bool)``:
+the same estimate and whether the sample is valid (Mitsuba's ``valid``), the alpha of a
+film whose ``pixel_format`` has one (``rgba``, ``xyza``, ``luminance_alpha``).  The kernel
+calls it only for such a film (an rgb film's kernel is unchanged); a wrapper's alpha is its
+nested integrator's, and without ``sample_valid`` the alpha is whether the camera ray hits
+a surface (0 with no radiance integrator: Mitsuba's ``aov`` alone).
+
 Mitsuba's ``aov`` integrator names its channels itself: its ``aovs`` property (``name:type``
 entries) picks fields of ``A`` by type and names them as aov.cpp does (``dd.y:depth`` ->
 ``dd.y.T``, ``nn:sh_normal`` -> ``nn.X``, ``nn.Y``, ``nn.Z``).  Mitsuba's ``stokes``
@@ -30,8 +37,8 @@ from ...compiler.ir import F32, SpectrumType, StructType, Type, VecType
 from ...core.color import ColorModel
 from ...core.scene_spec import Instance
 
-__all__ = ["AOV_TYPES", "AovChannel", "IntegratorPlan", "integrator_instances",
-           "integrator_plan"]
+__all__ = ["AOV_TYPES", "AovChannel", "IntegratorPlan", "has_sample_valid",
+           "integrator_instances", "integrator_plan"]
 
 # Mitsuba's aov types -> the field of stdlib/integrator/aov.rdsl's `Aov`, and the channel
 # suffixes aov.cpp gives them
@@ -44,6 +51,8 @@ AOV_TYPES: dict[str, tuple[str, ...]] = {
     "albedo": ("R", "G", "B"),
     "dp_du": ("X", "Y", "Z"),
     "dp_dv": ("X", "Y", "Z"),
+    "prim_index": ("I",),
+    "shape_index": ("I",),
 }
 _SUFFIXES = {2: ("U", "V"), 3: ("X", "Y", "Z")}
 POLARIZED_ONLY = ("stokes",)  # Mitsuba refuses these in unpolarized variants
@@ -115,6 +124,16 @@ def nests(integ: Any) -> bool:
     """Whether the integrator's ``sample`` takes the nested integrator's estimate."""
     params, _ = _decl(integ).signature("sample")
     return len(params) == 4
+
+
+def has_sample_valid(integ: Any) -> bool:
+    """Whether the integrator defines ``sample_valid``: its estimate and whether the sample
+    is valid (Mitsuba's ``valid``, the film's alpha)."""
+    try:
+        _decl(integ).signature("sample_valid")
+    except KeyError:
+        return False
+    return True
 
 
 def aov_struct(integ: Any) -> StructType | None:

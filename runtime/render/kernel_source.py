@@ -27,8 +27,8 @@ from ...compiler.diagnostics import CompileError
 from ...compiler.ir import SpectrumType, VecType
 from ...core.color import RGB, ColorModel
 from ..plugins import PluginDecl, kernel_imports, stdlib_plugin
-from .film import film_reach, film_uniforms
-from .integrators import IntegratorPlan, integrator_plan
+from .film import film_format, film_reach, film_uniforms
+from .integrators import IntegratorPlan, has_sample_valid, integrator_plan
 from .sensors import sensor_struct
 
 if TYPE_CHECKING:
@@ -117,10 +117,12 @@ def _imports(spectral: bool, plugins: list[str]) -> list[str]:
     return [f"import {m};" for m in modules]
 
 
-def _radiance_call(plan: IntegratorPlan, bufs: SceneBuffers, weight: str | None = None) -> str:
+def _radiance_call(plan: IntegratorPlan, bufs: SceneBuffers, weight: str | None = None,
+                   alpha: bool = False) -> str:
     """The kernel's lines computing `L` (and, with AOVs, the struct `sample_aovs`): the
     scene handle, the sampler, then the integrators (the nested one first); ``weight``:
-    the sensor's factor on the radiance (an irradiance meter's pi)."""
+    the sensor's factor on the radiance (an irradiance meter's pi).  ``alpha``: also
+    `valid`, the film's alpha (see :func:`_valid_call`)."""
     buffers = ", ".join(f"{b}: {b}" for b in SCENE_BUFFERS)
     lines = [f"    let scene = Scene {{ {buffers},",
              f"                         nemitter: {bufs.nlight}, env: {bufs.lights.env}, "
@@ -130,9 +132,14 @@ def _radiance_call(plan: IntegratorPlan, bufs: SceneBuffers, weight: str | None 
     source = plan.aov_source
     if radiance is None:
         lines.append("    let L0 = Spectrum(0.0);")
+    elif alpha and source is not radiance and has_sample_valid(radiance):
+        lines.append(f"    let (L0, valid) = {radiance.type}.sample_valid(scene, ray, sampler);")
+        alpha = False  # `valid` is set
     else:
         out = "(L0, sample_aovs)" if source is radiance else "L0"
         lines.append(f"    let {out} = {radiance.type}.sample(scene, ray, sampler);")
+    if alpha:
+        lines.append(_valid_call(radiance))
     if wrapper is None:
         lines.append("    let L = L0;")
     else:
@@ -142,6 +149,14 @@ def _radiance_call(plan: IntegratorPlan, bufs: SceneBuffers, weight: str | None 
         last = lines[-1].replace("(L,", "(Lu,").replace("let L =", "let Lu =")
         lines[-1:] = [last, f"    let L = Lu * {weight};"]
     return "\n".join(lines)
+
+
+def _valid_call(radiance: Any | None) -> str:
+    """The line computing `valid` for an integrator without ``sample_valid`` (or one
+    that returns AOVs): whether the camera ray hits a surface; none when the scene has no
+    radiance integrator (Mitsuba's `aov` alone: alpha 0)."""
+    return ("    let valid = false;" if radiance is None
+            else "    let valid = scene.trace(ray).valid;")
 
 
 def _aov_fields(plan: IntegratorPlan, channels: int, spectral: bool = False
@@ -225,12 +240,15 @@ def kernel_source(desc: Any, bufs: SceneBuffers, bsdfs: list[Instance],
     sensor, sensor_fields, sensor_module, sensor_weight = sensor_struct(desc.sensor)
     plugins += [sensor_module] if sensor_module else []
     aov_fields = _aov_fields(plan, channels, spectral)
+    alpha = film_format(desc.sensor.film, model.mono)[1]
+    if alpha:  # the film's alpha, right after the colour as in Mitsuba's film
+        aov_fields.insert(0, ("Float", "select(valid, 1.0, 0.0)"))
     value_type = "Vec3" if spectral else "Unpolarized" if mono_pol else "Spectrum"
     value = ("to_srgb(L * wavelength_weight)" if spectral else "unpolarized(L)"
              if mono_pol else "L")
     if derivative:
         aov_fields.append((value_type, f"derivative({value})"))
-    film = film_uniforms(desc.sensor.film, 1, channels=channels * (1 + derivative)
+    film = film_uniforms(desc.sensor.film, 1, channels=channels * (1 + derivative) + alpha
                          + len(plan.aov_channel_names()))
     seed_rng = (["    let (rng, u_wavelength) = next_1d(pcg32_seed(UInt64(seed), stream));",
                  "    let wavelength_weight = sample_wavelengths(u_wavelength);"] if spectral
@@ -244,7 +262,7 @@ def kernel_source(desc: Any, bufs: SceneBuffers, bsdfs: list[Instance],
         "aov_values": "".join(f"aov{k}: {e} * k, " for k, (_, e) in enumerate(aov_fields)),
         "camera": literal(sensor_fields, sensor),
         "seed_rng": "\n".join(seed_rng),
-        "radiance": _radiance_call(plan, bufs, sensor_weight),
+        "radiance": _radiance_call(plan, bufs, sensor_weight, alpha),
         "sampler_kind": str(sampler_kind(desc.sensor.sampler)),
         **_film_holes(film),
     })

@@ -40,7 +40,8 @@ from .bsdfs import (
 from .bvh import scene_bvh
 from .differentiable import SceneParams, gradient, render_forward
 from .emitters import KINDS as EMITTER_KINDS
-from .film import develop, film_uniforms, luminance_image, new_accumulator
+from .film import (COLOUR_CHANNELS, colour_image, develop, film_format, film_uniforms,
+                   new_accumulator)
 from .flatten import SceneBuffers, flatten
 from .integrators import integrator_instances, integrator_plan
 from .kernel_source import kernel_source, scene_plugins
@@ -319,25 +320,26 @@ class Scene:
 
     @property
     def channel_names(self) -> list[str]:
-        """The image's channels, as the EXR names them: R, G, B (Y in mono), then the AOVs of
-        the integrator (runtime/render/integrators.py), then, rendering a derivative, its
-        channels (``d.R``...)."""
+        """The image's channels, as the EXR names them: the film's colour (R, G, B; X, Y, Z;
+        or Y, as its ``pixel_format`` and the variant make it), A if the film has alpha, then
+        the AOVs of the integrator (runtime/render/integrators.py), then, rendering a
+        derivative, its channels (``d.R``...)."""
         names = self._film_channels
-        return ["Y"] + names[3:] if self._luminance else names
+        base = 1 if self.build.model.mono else 3
+        return COLOUR_CHANNELS[self._film_format[0]] + names[base:]
+
+    @property
+    def _film_format(self) -> tuple[str, bool]:
+        """(colour, alpha) of the film's ``pixel_format`` in this variant."""
+        return film_format(self.desc.sensor.film, self.build.model.mono)
 
     @property
     def _film_channels(self) -> list[str]:
         """The channels the film accumulates (the colour in the variant's own channels)."""
         base = ["Y"] if self.build.model.mono else ["R", "G", "B"]
-        return base + integrator_plan(self.desc.integrator).aov_channel_names() + \
+        return base + ["A"] * self._film_format[1] + \
+            integrator_plan(self.desc.integrator).aov_channel_names() + \
             [f"d.{c}" for c in base if self.derivative]
-
-    @property
-    def _luminance(self) -> bool:
-        """The film's ``pixel_format`` is luminance in a colour variant: the image's R, G, B
-        become their luminance Y, as Mitsuba's film develops them (AOVs stay)."""
-        fmt = self.desc.sensor.film.params.get("pixel_format", "rgb")
-        return fmt == "luminance" and not self.build.model.mono
 
     def render(self, spp: int | None = None, seed: int | None = None,
                threads: int | None = None, progress: bool = False,
@@ -403,7 +405,7 @@ class Scene:
             c = film["channels"]
             self.film_weights = ((spp, seed), acc.reshape(-1, c + 1)[:, c].copy())
         img = develop(acc, dict(film, spp=spp))
-        return luminance_image(img) if self._luminance else img
+        return img if self.build.model.mono else colour_image(img, self._film_format[0])
 
     def _scene_args(self, mod: Any) -> list[Any]:
         """The scene's buffers for ``mod``'s kernels: the arrays, or on a device target

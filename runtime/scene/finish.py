@@ -8,7 +8,6 @@ collected; it uses the builder's ``what``, ``file`` and ``default``.
 
 from __future__ import annotations
 
-import warnings
 from collections.abc import Callable
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -243,14 +242,6 @@ class Finishers:
                                   f"crop_{size}={crop} do not fit in {size}={p[size]}",
                                   _loc(node, f"crop_{size}" if f"crop_{size}" in node.props
                                        else f"crop_offset_{axis}"))
-
-        fmt = p["pixel_format"]
-        if fmt not in ("rgb", "luminance"):  # rdsl's film has no alpha and no XYZ output
-            p["pixel_format"] = "luminance" if fmt.startswith("luminance") else "rgb"
-            loc = _loc(node, "pixel_format")
-            warnings.warn(f"{loc.file}:{loc.line}: hdrfilm: pixel_format '{fmt}' is not "
-                          f"supported (no alpha or XYZ channels): the image is "
-                          f"'{p['pixel_format']}'", stacklevel=2)
 
     def finish_rfilter(self, obj: Plugin, node: ObjectNode, objects: dict) -> None:
         for k, v in obj.params.items():
