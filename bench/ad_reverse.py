@@ -82,7 +82,8 @@ def main() -> int:
             carried, taped, grad = adjoint_state(scene)
             print(f"adjoint of the bounce loop: {carried} bytes per lane carried (k, the "
                   f"adjoints of the carried values), {taped} bytes per lane per bounce "
-                  f"stored (a checkpoint of the carried state for each of the first {TAPE} "
+                  f"stored (the carried state and the forward values the sweep reads, "
+                  f"for each of the first {TAPE} "
                   f"bounces, {(TAPE + 1) * taped} bytes per lane's tape row); gradient rows: "
                   f"{grad} bytes each, 64 per thread")
         rows.append((depth, *measure(scene, args)))

@@ -97,12 +97,12 @@ def test_detach_stops_the_gradient():
 
 def _dot_test(scene, names, spp=4, seed=5):
     """<d_img, render_forward(name, tangent)> against <backward(d_img)[name], tangent>."""
-    h, w = scene.render(spp=1).shape[:2]
+    h, w, c = scene.render(spp=1).shape
     rng = np.random.default_rng(1)
-    d = rng.standard_normal((h, w, 3))
+    d = rng.standard_normal((h, w, c))
     grads = scene.backward(d, params=names, spp=spp, seed=seed)
     for name in names:
-        t = rng.uniform(0.2, 1.0, 3).astype(np.float32)
+        t = rng.uniform(0.2, 1.0, scene.params[name].size).astype(np.float32)
         _, d_img = scene.render_forward(name, spp=spp, seed=seed, tangent=t)
         want = float(np.sum(d_img.astype(np.float64) * d))
         got = float(np.dot(grads[name].astype(np.float64), t))
@@ -116,6 +116,42 @@ NAMES = ["red.reflectance.value", "white.reflectance.value", "light.emitter.radi
 @needs_cbox
 def test_cbox_backward_matches_forward_mode_fixed_depth():
     _dot_test(rdsl.load_scene(CBOX, res=16, max_depth=5), NAMES)
+
+
+@needs_cbox
+def test_cbox_backward_with_a_crop_a_border_and_a_wide_filter_matches_forward_mode(tmp_path):
+    # the film's gather transposed (stdlib/render/adjoint.rdsl.in) reads d_img over the
+    # sample grid grown by the filter's reach: a crop window off the film's corner, samples
+    # beyond it (sample_border) and a filter reaching 2 pixels exercise its layout
+    text = CBOX.read_text().replace('<rfilter type="gaussian"/>', (
+        '<rfilter type="mitchell"/><boolean name="sample_border" value="true"/>'
+        '<integer name="crop_offset_x" value="3"/><integer name="crop_width" value="10"/>'
+        '<integer name="crop_offset_y" value="5"/><integer name="crop_height" value="7"/>'))
+    (tmp_path / "cbox.xml").write_text(text)
+    _dot_test(rdsl.load_scene(tmp_path / "cbox.xml", res=16, max_depth=3), NAMES[:2])
+
+
+@needs_cbox
+def test_cbox_backward_in_mono_matches_forward_mode():
+    _dot_test(rdsl.load_scene(CBOX, res=8, max_depth=3, variant="mono"), NAMES[1:])
+
+
+@needs_cbox
+def test_backward_reuses_a_render_s_pixel_weights_only_for_its_own_samples():
+    # backward divides by each pixel's total film weight: the last render's when it had the
+    # same spp and seed, else a render's now; both give the same gradient, bit for bit
+    scene = rdsl.load_scene(CBOX, res=8, max_depth=3)
+    scene.params[NAMES[0]] = scene.params[NAMES[0]]  # the generic build, which keeps them
+    d = np.random.default_rng(4).standard_normal((8, 8, 3))
+    scene.render(spp=4, seed=3)
+    assert scene.film_weights[0] == (4, 3)
+    kept = scene.backward(d, params=NAMES, spp=4, seed=3)
+    scene.render(spp=2, seed=8)
+    fresh = scene.backward(d, params=NAMES, spp=4, seed=3)
+    assert scene.film_weights[0] == (4, 3)
+    for name in NAMES:
+        assert np.any(kept[name] != 0)
+        np.testing.assert_array_equal(kept[name], fresh[name], err_msg=name)
 
 
 @needs_cbox
@@ -138,7 +174,7 @@ def test_cbox_backward_tape_equals_recomputation_with_russian_roulette():
 
     for t in (2, 16):  # the bounce loop's state is on the tape: one slot past the cap
         kernel = next(k for k in ad_twin(scene, "reverse", 0, t).compile().manifest[
-            "kernels"] if k["name"] == "render_sample")
+            "kernels"] if k["name"] == "render_sample_loss")
         floats = [p["tape_floats"] for p in kernel["params"] if p["name"] == "ad_tape"]
         assert len(floats) == 1 and floats[0] % (t + 1) == 0 and floats[0] > t + 1
     assert any(np.any(g != 0) for g in got[0].values())

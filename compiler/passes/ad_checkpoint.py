@@ -9,15 +9,23 @@ iterations beyond and is never read).  The row starts at ``ad_row_tape``; the ke
 the two as arguments after the others (a uniform Float buffer, a varying Int) and the
 manifest's ``tape_floats`` is the row's length.  A loop inside another loop is not taped
 (each outer iteration would overwrite its slots): its adjoint recomputes from the start.
+
+The values the adjoint's sweep of an iteration reads from its run of the body forward (its
+intermediate values: partial derivatives, branch conditions, scatter indices) are stored
+the same way, after the carried state, so that the adjoint's iteration k < C loads them
+instead of running the body forward again (:meth:`Checkpoints.keep`); beyond C it runs it.
 """
 
 from __future__ import annotations
+
+from collections.abc import Iterator
 
 from ..ir import BOOL, F32, I32, U32, U64, Block, BufferType, Builder, Function, Instr, Op, \
     Param, Value, type_to_json
 
 TAPE, TAPE_ROW = "ad_tape", "ad_row_tape"
 _TYPES = (F32, I32, U32, BOOL, U64)
+
 
 
 class Checkpoints:
@@ -29,6 +37,7 @@ class Checkpoints:
         self.size = 0  # floats per lane
         self.stores: set[int] = set()  # the instructions the primal loops got (their ids)
         self.loops: dict[int, tuple[int, int]] = {}  # a taped loop -> (offset, floats)
+        self.slots: dict[int, Value] = {}  # a taped loop -> its slot, in its body
 
     def store(self, block: Block) -> None:
         """Make each counted loop of ``block`` that no loop encloses store its state."""
@@ -51,6 +60,7 @@ class Checkpoints:
             body.instrs[:0] = tb.block.instrs
             self.loops[id(ins)] = (self.size, len(floats))
             self.size += (self.cap + 1) * len(floats)
+            self.slots[id(ins)] = slot
 
     def load(self, ins: Instr, k: Value, b: Builder) -> tuple[list[Value], Value] | None:
         """For taped loop ``ins``: its carried values at checkpoint c = min(k, C - 1) and
@@ -64,6 +74,42 @@ class Checkpoints:
         state = [_unpack(xs, a.type, b) for a in ins.regions[0].args[:-1]]
         return [*state, c], b.op(Op.SUB, I32, k, c)
 
+    def keep(self, loop: Instr, block: Block, new: list[Instr], k: Value,
+             origin: dict[Value, Value]) -> None:
+        """Tape the values the sweep of ``loop``'s adjoint reads from its copy of the body:
+        the primal body stores them (slot min(n, C)), and the adjoint's iteration k < C
+        loads them instead of running the body forward again (``new``: the copy's
+        instructions in ``block``, the rest of ``block`` its sweep; ``origin``: a copied
+        value -> the primal's)."""
+        if id(loop) not in self.slots or not new:
+            return
+        start = next(i for i, x in enumerate(block.instrs) if x is new[0])
+        sweep = block.instrs[start + len(new):]
+        made = {r for i in new for r in i.results}
+        used = list(dict.fromkeys(v for i in sweep for v in _operands(i) if v in made))
+        if not used or any(v.type not in _TYPES or v not in origin for v in used):
+            return
+        body = loop.regions[0]
+        end = body.instrs.pop()
+        pb = Builder(body, end.loc)
+        floats = [x for v in used for x in _pack(origin[v], pb)]
+        offset, size = self.size, len(floats)
+        for x, idx in zip(floats, self._slot(self.slots[id(loop)], size, offset, pb)):
+            pb.emit(Op.STORE, [self.buf, idx, x], [])
+        body.instrs.append(end)
+        self.size += (self.cap + 1) * size
+        b = Builder(Block(), loop.loc)
+        cond = b.op(Op.LT, BOOL, k, b.const(self.cap, I32))
+        then, other = Block(), Block()
+        tb = Builder(then, loop.loc)
+        xs = iter([tb.op(Op.LOAD, F32, self.buf, i) for i in self._slot(k, size, offset, tb)])
+        tb.yield_(*[_unpack(xs, v.type, tb) for v in used])
+        other.instrs = list(new)
+        Builder(other, loop.loc).yield_(*used)
+        choice = b.emit(Op.IF, [cond], [v.type for v in used], regions=[then, other])
+        _replace(sweep, dict(zip(used, choice.results)))
+        block.instrs = [*block.instrs[:start], *b.block.instrs, *sweep]
+
     def add_params(self, fn: Function) -> list[dict]:
         """Give ``fn`` the tape's arguments, if it has a tape; their ABI entries."""
         if not self.size:
@@ -74,11 +120,30 @@ class Checkpoints:
                 {"name": TAPE_ROW, "type": {"kind": "scalar", "dtype": "i32"},
                  "uniform": False, "default": None, "leaves": [TAPE_ROW]}]
 
-    def _slot(self, slot: Value, size: int, offset: int, b: Builder) -> list[Value]:
-        """The tape indices of the ``size`` values of slot ``slot`` of a loop's part."""
+    def _slot(self, slot: Value, size: int, offset: int, b: Builder,
+              count: int | None = None) -> list[Value]:
+        """The tape indices of the first ``count`` (all ``size``) values of slot ``slot``
+        of a loop's part."""
         base = b.op(Op.ADD, I32, self.row, b.op(Op.ADD, I32, b.op(
             Op.MUL, I32, slot, b.const(size, I32)), b.const(offset, I32)))
-        return [base, *[b.op(Op.ADD, I32, base, b.const(j, I32)) for j in range(1, size)]]
+        return [base, *[b.op(Op.ADD, I32, base, b.const(j, I32))
+                        for j in range(1, size if count is None else count)]]
+
+
+def _operands(ins: Instr) -> Iterator[Value]:
+    """The values ``ins`` reads, in its regions too."""
+    yield from ins.operands
+    for r in ins.regions:
+        for i in r.instrs:
+            yield from _operands(i)
+
+
+def _replace(instrs: list[Instr], new: dict[Value, Value]) -> None:
+    """Read ``new[v]`` for each ``v`` in ``instrs`` and their regions."""
+    for ins in instrs:
+        ins.operands = [new.get(v, v) for v in ins.operands]
+        for r in ins.regions:
+            _replace(r.instrs, new)
 
 
 def _pack(v: Value, b: Builder) -> list[Value]:

@@ -315,9 +315,10 @@ class _Reverse:
         return new, m
 
     def region(self, block: Block, args: list[Value], seeds: dict[int, Value], b: Builder
-               ) -> tuple[dict[Value, Value], dict[Value, Value], set[Value]]:
+               ) -> tuple[dict[Value, Value], dict[Value, Value], set[Value], list[Instr]]:
         """Recompute ``block`` into ``b`` and sweep it, seeded with the adjoints of its
-        yielded values (index -> adjoint): (adjoints, mapping, values defined there)."""
+        yielded values (index -> adjoint): (adjoints, mapping, values defined there, the
+        recomputing instructions)."""
         new, m = self.clone_into(block, args, b)
         y = block.instrs[-1].operands
         local: dict[Value, Value] = {}
@@ -327,7 +328,7 @@ class _Reverse:
         self.sweep(new, local, b)
         _mark_sweep(b.block, mark)
         defined = {r for ins in new for r in _defined(ins)}
-        return local, m, defined
+        return local, m, defined, new
 
     def if_(self, ins: Instr, adj: dict[Value, Value], b: Builder) -> None:
         seeds = {i: adj.pop(r) for i, r in enumerate(ins.results) if r in adj}
@@ -381,7 +382,7 @@ class _Reverse:
         rb = Builder(ab, ins.loc)
         state = self._state_at(ins, k, rb)
         self.varied.update(state[i] for i in hot)
-        local, _, defined = self.region(
+        local, m, defined, fwd = self.region(
             body, state, {1 + i: a for i, a in zip(hot, ads)}, rb)
         carried = set(state)
         free = [v for v in local if v not in defined and v not in carried]
@@ -398,6 +399,8 @@ class _Reverse:
         new = b.emit(Op.LOOP, [first, *[seeds.get(i) or zero for i in hot],
                                *[zero] * len(free)],
                      [I32, *[F32] * (len(hot) + len(free))], regions=[ab])
+        # a taped loop: iteration k < C loads what its sweep reads instead of running fwd
+        self.tape.keep(ins, ab, fwd, k, {c: o for o, c in m.items()})
         res = new.results[1:]
         for i, r in zip(hot, res):
             self.acc(adj, init[i], r, b)

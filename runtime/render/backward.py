@@ -32,8 +32,10 @@ import numpy as np
 from ...compiler.build import elimination_threshold
 from ...compiler.diagnostics import CompileError
 from ...core.scene_spec import Slot
+from ..scene.samplers import sample_count
 from .differentiable import Texels, _lookup, ad_twin
-from .film import film_reach, film_uniforms, sample_weights
+from .film import film_reach, film_uniforms
+from .kernel_source import SCENE_BUFFERS
 
 if TYPE_CHECKING:
     from .renderer import Scene
@@ -65,28 +67,32 @@ def _check(scene: Scene, d_img: Any, params: list[str]) -> tuple[np.ndarray, dic
     return d.reshape(shape), chosen
 
 
-def _taps(film: dict, n: int) -> tuple[np.ndarray, np.ndarray]:
-    """Per film cell, the crop-relative pixel index of each of the (2n+1)^2 pixels a
-    sample of the cell reaches (cells, rows, columns), and whether it is in the crop."""
-    cell = np.arange(film["grid_w"] * film["grid_h"])
-    k = np.arange(2 * n + 1)
-    qx = (cell % film["grid_w"] + film["grid_x"] - film["crop_x"])[:, None] - n + k
-    qy = (cell // film["grid_w"] + film["grid_y"] - film["crop_y"])[:, None] - n + k
-    h, w = film["crop_h"], film["crop_w"]
-    ok = ((qy >= 0) & (qy < h))[:, :, None] & ((qx >= 0) & (qx < w))[:, None, :]
-    pix = np.clip(qy, 0, h - 1)[:, :, None] * w + np.clip(qx, 0, w - 1)[:, None, :]
-    return pix, ok
-
-
 LANES = 16  # the widest SIMD packet: lanes of one packet add gradients into rows of their
 # own (array position mod LANES), each part of the adjoint pass into LANES rows (_Parts)
 PARTS_PER_THREAD = 4
-CELLS_AT_ONCE = 2048
 TAPE = 16  # bounces whose carried state the adjoint kernel checkpoints per lane (the
 # rest it recomputes from the last checkpoint: compiler/passes/ad_reverse.py)
 
 
-# long: two passes over the batches, then the reduction
+def _pixel_adjoints(scene: Scene, d: np.ndarray, spp: int, seed: int,
+                    threads: int | None) -> np.ndarray:
+    """``D`` of ``render_sample_loss``: d loss / d pixel over the pixel's total film weight
+    (that of the last ``render()`` of the same samples, or of a render now), over the
+    sample grid grown by the film's reach on each side, zero outside the crop."""
+    kept = getattr(scene, "film_weights", None)
+    if not kept or kept[0] != (spp, seed):
+        scene.render(spp=spp, seed=seed, threads=threads)
+        kept = scene.film_weights
+    film = film_uniforms(scene.desc.sensor.film, 1, channels=1)
+    h, w, n = film["crop_h"], film["crop_w"], film_reach(film)
+    weights = kept[1].reshape(h, w, 1).astype(np.float64)
+    pad = np.zeros((film["grid_h"] + 2 * n, film["grid_w"] + 2 * n, d.shape[2]), np.float32)
+    y, x = film["crop_y"] - film["grid_y"] + n, film["crop_x"] - film["grid_x"] + n
+    pad[y:y + h, x:x + w] = d / np.where(weights == 0, 1.0, weights)
+    return pad.reshape(-1)
+
+
+# long: the setup of the adjoint pass, then its batches
 def backward(scene: Scene, d_img: Any, params: list[str], spp: int | None = None,
              seed: int | None = None, threads: int | None = None,
              eliminate: bool | int = False, tape: int = TAPE) -> dict[str, np.ndarray]:
@@ -95,95 +101,56 @@ def backward(scene: Scene, d_img: Any, params: list[str], spp: int | None = None
     from .renderer import BATCH_SAMPLES
 
     d, chosen = _check(scene, d_img, params)
-    spp = int(spp or scene.spp)
+    spp = sample_count(scene.desc.sensor.sampler, int(spp or scene.spp))
     seed = scene.seed if seed is None else int(seed)
     scene.use_generic()
-    plain = scene.compile()
+    D = _pixel_adjoints(scene, d, spp, seed, threads)
     twin = ad_twin(scene, "reverse", elimination_threshold("reverse", eliminate), tape)
     mod = twin.compile()
-    for m in (plain, mod):
-        if m.traces_rays:
-            m.bind_scene(scene.embree)
+    if mod.traces_rays:
+        mod.bind_scene(scene.embree)
     prm = np.array(scene.prm, np.float32)
     twin.prm = prm
     film = film_uniforms(scene.desc.sensor.film, 1, channels=1)
-    n = film_reach(film)
     cells = film["grid_w"] * film["grid_h"]
     batch = max(1, min(spp, BATCH_SAMPLES // max(cells, 1)))
     seed_bits = int(np.uint32(seed).view(np.int32))
-    batches = []
-    for done in range(0, spp, batch):
-        k = min(batch, spp - done)
-        j = np.arange(cells * k, dtype=np.int32)
-        rs = np.array([done, spp, seed_bits], np.int32)
-        batches.append((j, rs))
-    pix, ok = _taps(film, n)
-    per_tap = np.zeros(pix.shape)
-    outs = []
-    # the film weights of the samples: those the last render() of these samples kept (they
-    # depend on where each sample falls on the film, not on the parameters), or a plain pass
-    kept = getattr(scene, "film_weights", None)
-    kept = kept[1] if kept and kept[0] == (spp, seed) and kept[1] is not None and \
-        len(kept[1]) == len(batches) else None
-    scene.film_weights = None  # used once: its memory is free again
-    for b, (j, rs) in enumerate(batches):  # 1. the film's total weight per pixel
-        if kept is not None:
-            wx, wy = kept[b]
-        else:
-            out = plain["render_sample"](j, rs, *scene.buffers.args(), prm, threads=threads)
-            wx, wy = sample_weights(out, n, cells)
-        outs.append((wx, wy))
-        # sum over the samples of wy wx^T, per cell: a batched matrix product
-        per_tap += np.matmul(wy.transpose(1, 2, 0), wx.transpose(1, 0, 2))
-    h, w = film["crop_h"], film["crop_w"]
-    weights = np.bincount(pix[ok], per_tap[ok], h * w).reshape(h, w)
-    g = d / np.where(weights == 0, 1.0, weights)[..., None]
-    # per cell, the taps' g as (columns, rows x channels), 0 outside the crop
-    g_qrx = g.astype(np.float32).reshape(h * w, -1)[pix.transpose(0, 2, 1)]
-    g_qrx *= ok.transpose(0, 2, 1)[..., None]
-    g_qrx = g_qrx.reshape(len(pix), pix.shape[2], -1)
-    kernel = next(k for k in mod.manifest["kernels"] if k["name"] == "render_sample")
+    kernel = next(k for k in mod.manifest["kernels"] if k["name"] == "render_sample_loss")
     names = [p["name"] for p in kernel["params"]]
     parts = _Parts(prm, scene.buffers.T, any(isinstance(c, Texels) for c in chosen.values()),
                    threads)
     floats = next((p.get("tape_floats", 0) for p in kernel["params"]
                    if p["name"] == "ad_tape"), 0)
     tape_rows = np.zeros(max(1, parts.parts * LANES * floats), np.float32)  # per lane
-    uniform = {"gPRM": parts.gPRM, "gT": parts.gT, "ad_tape": tape_rows}
-    for (j, rs), (wx, wy) in zip(batches, outs):  # 2. and 3.
-        a = _sample_adjoints(wx, wy, g_qrx)
-        seeds = {f"a_ret_value_{c}": a[:, i] for i, c in enumerate("xyz"[:a.shape[1]])}
-        if a.shape[1] == 1:
-            seeds = {"a_ret_value": a[:, 0]}
-        varying = {"ad_row": parts.rows(j.size, prm.size), "ad_row_T":
-                   parts.rows(j.size, scene.buffers.T.size) if parts.texels else
-                   np.zeros(j.size, np.int32), "ad_row_tape": parts.rows(j.size, floats)} | seeds
-        head = [rs, *scene.buffers.args(), prm]
-        zero = np.zeros(j.size, np.float32)  # every adjoint seed that is 0 (read only)
-        rest = [(uniform[x], False) if x in uniform else (varying.get(x, zero), True)
-                for x in names[names.index("PRM") + 1:]]
-        parts.run(partial(_adjoint_part, mod["render_sample"], j, head, rest), j.size)
+    buffers = dict(zip(SCENE_BUFFERS, scene.buffers.args()))
+    uniform = buffers | {"D": D, "PRM": prm, "gPRM": parts.gPRM, "gT": parts.gT,
+                         "ad_tape": tape_rows}
+    j = np.arange(cells * batch, dtype=np.int32)
+    ones = np.ones(j.size, np.float32)  # every seed: d (sum of the kernel's result) = 1
+    for done in range(0, spp, batch):
+        n = cells * min(batch, spp - done)
+        varying = {"j": j[:n], "ad_row": parts.rows(n, prm.size), "ad_row_tape":
+                   parts.rows(n, floats), "ad_row_T": parts.rows(n, scene.buffers.T.size)
+                   if parts.texels else np.zeros(n, np.int32)}
+        uniform["BATCH"] = np.array([done, spp, seed_bits], np.int32)
+        args = [(varying[x], True) if x in varying else (uniform[x], False)
+                if x in uniform else (_seed(x, ones[:n]), True) for x in names]
+        parts.run(partial(_adjoint_part, mod["render_sample_loss"], args), n)
     return {name: parts.gradient(c) for name, c in chosen.items()}
 
 
-def _sample_adjoints(wx: np.ndarray, wy: np.ndarray, g_qrx: np.ndarray) -> np.ndarray:
-    """Each sample's adjoint, sum over the pixels it reaches of wy wx g (g: d_img over the
-    pixel's total weight, per cell as (columns, rows x channels)): (samples, channels).
-    Batched matrix products (numpy's einsum of the three took 3x as long)."""
-    s, cells, m = wx.shape
-    out = np.empty((s, cells, g_qrx.shape[2] // m), np.float32)
-    for lo in range(0, cells, CELLS_AT_ONCE):  # a few MB of temporaries at a time
-        hi = min(lo + CELLS_AT_ONCE, cells)
-        t = np.matmul(wx[:, lo:hi].transpose(1, 0, 2), g_qrx[lo:hi])  # (cells, s, m x C)
-        t = t.reshape(hi - lo, s, m, -1) * wy[:, lo:hi].transpose(1, 0, 2)[..., None]
-        out[:, lo:hi] = t.sum(2).transpose(1, 0, 2)
-    return out.reshape(s * cells, -1)
+def _seed(name: str, ones: np.ndarray) -> np.ndarray:
+    """The adjoint seed ``a_ret_*`` of a channel of ``render_sample_loss``'s result."""
+    if not name.startswith("a_ret"):
+        raise CompileError(f"the adjoint render kernel has an argument `{name}` that "
+                           "backward does not know")
+    return ones
 
 
-def _adjoint_part(kernel, j: np.ndarray, head: list, rest: list, lo: int, hi: int) -> None:
-    """The adjoint kernel over samples [lo, hi) of a batch (``rest``: the adjoint's own
-    arguments and whether each is varying: those are sliced, the gradient buffers not)."""
-    kernel(j[lo:hi], *head, *[x[lo:hi] if varying else x for x, varying in rest], threads=1)
+def _adjoint_part(kernel, args: list, lo: int, hi: int) -> None:
+    """The adjoint kernel over samples [lo, hi) of a batch (``args``: its arguments and
+    whether each is varying: those are sliced, the buffers not)."""
+    kernel(*[x[lo:hi] if varying else x for x, varying in args], threads=1)
 
 
 class _Parts:

@@ -123,13 +123,3 @@ def film_reach(film: dict[str, Any]) -> int:
     """Columns (rows) a sample reaches on each side of its cell (as `film_reach` in rdsl)."""
     radius = _radius(film["filter"], film["filter_param"])
     return int(np.ceil(np.float32(radius) + np.float32(0.5))) - 1
-
-
-def sample_weights(out: dict[str, Any], n: int, cells: int) -> tuple[np.ndarray, np.ndarray]:
-    """The samples' column and row filter weights from ``render_sample``'s outputs ``w*``,
-    (samples per cell, cells, 2n+1) each (a batch is sample-major: sample j is in cell
-    j % cells); copies."""
-    m = 2 * n + 1
-    wx = np.stack([np.asarray(out[f"w{k}"], np.float32) for k in range(m)], -1)
-    wy = np.stack([np.asarray(out[f"w{m + k}"], np.float32) for k in range(m)], -1)
-    return wx.reshape(-1, cells, m), wy.reshape(-1, cells, m)

@@ -38,6 +38,7 @@ if TYPE_CHECKING:
 __all__ = ["SCENE_BUFFERS", "kernel_source", "literal", "scene_plugins"]
 
 TEMPLATE = Path(__file__).resolve().parents[2] / "stdlib" / "render" / "kernel.rdsl.in"
+ADJOINT = TEMPLATE.with_name("adjoint.rdsl.in")  # appended for scene.backward
 # the buffers of a `Scene` (stdlib/render/integrator.rdsl), the kernel's arguments of the
 # same names
 SCENE_BUFFERS = ("P", "N", "UV", "F", "G", "LC", "LT", "T", "EK", "E", "ENV", "BV", "BI")
@@ -72,16 +73,16 @@ def literal(value: Any, struct: str | None = None) -> str:
 
 
 @cache
-def _template() -> list[str]:
+def _template(path: Path = TEMPLATE) -> list[str]:
     """The template's lines, without its own ``//#`` notes."""
-    return [line for line in TEMPLATE.read_text().split("\n") if not line.startswith("//#")]
+    return [line for line in path.read_text().split("\n") if not line.startswith("//#")]
 
 
-def fill(holes: dict[str, str]) -> str:
+def fill(holes: dict[str, str], path: Path = TEMPLATE) -> str:
     """The template with ``holes`` substituted; a line that is a lone hole left empty
     (no extra imports) is dropped rather than left blank."""
     out = []
-    for line in _template():
+    for line in _template(path):
         name = line[1:] if line.startswith("$") else None
         if name is not None and name.isidentifier() and holes.get(name) == "":
             continue
@@ -208,13 +209,35 @@ def _film_holes(film: dict[str, Any]) -> dict[str, str]:
     }
 
 
+def _adjoint_source(film: dict[str, Any], model: ColorModel, value_type: str) -> str:
+    """``render_sample_loss`` (stdlib/render/adjoint.rdsl.in) for the scene's film: one
+    line per pixel a sample reaches, adding its weight times D's value there."""
+    if model.polarized and not model.mono:
+        raise CompileError("reverse-mode gradients of a render are not offered in the "
+                           "rgb polarized variants yet")
+    n = film_reach(film)
+    m, c, row = 2 * n + 1, 1 if model.mono else 3, film["grid_w"] + 2 * n
+    make = {"Vec3": "Vec3", "Unpolarized": "Unpolarized"}.get(value_type, "Spectrum")
+    taps = ["    let b = %d * q;" % c]
+    for dy in range(m):
+        for dx in range(m):
+            at = c * (dy * row + dx)
+            px = ", ".join(f"D[b + {at + k}]" for k in range(c))
+            taps.append(f"    a = a + f.w{dx} * f.w{m + dy} * {make}({px});")
+    return fill({"value_type": value_type, "cells": str(film["grid_w"] * film["grid_h"]),
+                 "grid_w": str(film["grid_w"]), "pad_w": str(row),
+                 "zero": f"{make}(0.0)", "taps": "\n".join(taps)}, ADJOINT)
+
+
 def kernel_source(desc: Any, bufs: SceneBuffers, bsdfs: list[Instance],
                   emitters: list[Instance], model: ColorModel = RGB,
-                  derivative: bool = False) -> str:
+                  derivative: bool = False, adjoint: bool = False) -> str:
     """The scene's render kernel in rdsl: constants of this scene, stdlib code for the rest.
     A spectral kernel samples its wavelengths first and gives the film linear sRGB.
     ``derivative``: the film also gets the derivative of the radiance (``derivative(x)``,
-    along the parameter tangent of a forward-mode build), as channels after the AOVs."""
+    along the parameter tangent of a forward-mode build), as channels after the AOVs.
+    ``adjoint``: with ``render_sample_loss`` after it, whose reverse-mode kernel
+    ``scene.backward`` runs (stdlib/render/adjoint.rdsl.in)."""
     spectral, channels = model.spectral, model.channels
     # a polarized L is a Mueller matrix: the film records the intensity (entry [0][0], the
     # first Stokes component for the unpolarized emitters), as Mitsuba's film does
@@ -238,7 +261,7 @@ def kernel_source(desc: Any, bufs: SceneBuffers, bsdfs: list[Instance],
     seed_rng = (["    let (rng, u_wavelength) = next_1d(pcg32_seed(UInt64(seed), stream));",
                  "    let wavelength_weight = sample_wavelengths(u_wavelength);"] if spectral
                 else ["    let rng = pcg32_seed(UInt64(seed), stream);"])
-    return fill({
+    src = fill({
         "scene_name": Path(desc.path).name,
         "imports": "\n".join(_imports(spectral, plugins)),
         "value_type": value_type,
@@ -252,3 +275,4 @@ def kernel_source(desc: Any, bufs: SceneBuffers, bsdfs: list[Instance],
         "sampler_kind": str(sampler_kind(desc.sensor.sampler)),
         **_film_holes(film),
     })
+    return src + "\n" + _adjoint_source(film, model, value_type) if adjoint else src

@@ -40,9 +40,8 @@ from .bsdfs import (
 from .bvh import scene_bvh
 from .differentiable import SceneParams, gradient, render_forward
 from .emitters import KINDS as EMITTER_KINDS
-from .film import (COLOUR_CHANNELS, colour_image, develop, film_format, film_reach,
-                   film_uniforms, new_accumulator,
-                   sample_weights)
+from .film import (COLOUR_CHANNELS, colour_image, develop, film_format, film_uniforms,
+                   new_accumulator)
 from .flatten import SceneBuffers, flatten
 from .integrators import integrator_instances, integrator_plan
 from .kernel_source import kernel_source, scene_plugins
@@ -54,9 +53,6 @@ from .shapes import KINDS as SHAPE_KINDS
 ACCELS = ("embree", "bvh")  # how rays are traced (`--accel`)
 # samples per kernel call: small enough that a batch's sample buffers stay in cache
 BATCH_SAMPLES = 1 << 17
-# the most memory a render keeps of its samples' film weights for a backward() of the same
-# samples (which then skips a plain pass); a larger render (a high-spp target) keeps none
-KEEP_WEIGHTS_BYTES = 32 << 20
 # renders of at most this many samples, whose kernels are not in the cache yet, compile the
 # quick tier (LLVM O0): it saves about 40% of a cold compile, more than its slower kernels
 # (15-30%) lose on a render of this size (docs/bench.md)
@@ -179,6 +175,8 @@ class Scene:
         src, scene, filename = self._kernel_inputs()
         kw = {"build": self.build, "scene": scene, "search_paths": self.search_paths,
               "filename": filename}
+        if self.build.ad == "reverse":  # backward runs this kernel's adjoint, and no other
+            kw["exports"] = ["render_sample_loss"]
         try:
             mod = jit(src, quick=quick and not jit_cached(src, **kw), **kw)
         except NoRayTracer:  # one line: what is missing, not the integrator's source
@@ -196,7 +194,8 @@ class Scene:
         file name its diagnostics show; sets the report, kernel_src, scene_spec and
         search_paths (and PRM, for the generic build)."""
         src = kernel_source(self.desc, self.buffers, self.bsdfs, self.emitters,
-                            self.build.model, derivative=self.derivative)
+                            self.build.model, derivative=self.derivative,
+                            adjoint=self.build.ad == "reverse")
         scene = self.scene_spec_for_params()
         # the report is derived from the scene, so a cache hit can print it too
         self.report = describe(scene) + self._folding(scene)
@@ -374,8 +373,6 @@ class Scene:
         seed_bits = int(np.uint32(seed).view(np.int32))
         waiting = None  # (samples, n) of the rendered batch the film has not taken yet
         done = k = 0
-        keep = [] if self._prm_set and not self.derivative else None  # weights, for backward
-        kept_bytes = 0
         while done < spp or waiting is not None:
             job = None
             if done < spp:
@@ -392,11 +389,6 @@ class Scene:
                 mod["film_pass"](pixels, np.array([m, ns], np.int32), _film_samples(prev, ns),
                                  acc, threads=threads)
                 self.nonfinite += int(np.count_nonzero(prev["bad"]))
-                if keep is not None:
-                    keep.append(sample_weights(prev, film_reach(film), cells))
-                    kept_bytes += sum(w.nbytes for w in keep[-1])
-                    if kept_bytes > KEEP_WEIGHTS_BYTES:
-                        keep = None  # a large render: backward recomputes them instead
                 bar.update(done)
             waiting = None
             if job is not None:
@@ -408,8 +400,11 @@ class Scene:
                     bar.finish()
                     raise RenderCancelled(f"cancelled after {done} of {spp} spp")
         bar.finish()
-        self.film_weights = ((spp, seed), keep)
-        img = develop(acc.get() if hasattr(acc, "get") else acc, dict(film, spp=spp))
+        acc = acc.get() if hasattr(acc, "get") else acc
+        if self._prm_set and not self.derivative:  # for backward: each pixel's total weight
+            c = film["channels"]
+            self.film_weights = ((spp, seed), acc.reshape(-1, c + 1)[:, c].copy())
+        img = develop(acc, dict(film, spp=spp))
         return img if self.build.model.mono else colour_image(img, self._film_format[0])
 
     def _scene_args(self, mod: Any) -> list[Any]:
