@@ -24,6 +24,7 @@ import pytest
 pytest.importorskip("rdsl.runtime.embree")
 
 from rdsl.compiler.diagnostics import CompileError
+from rdsl.core import spectral as S
 from rdsl.core.spectral import srgb_model_mean
 from rdsl.runtime.render.image import write_exr
 from rdsl.runtime.render.renderer import load_scene
@@ -277,7 +278,7 @@ def test_two_textured_weights_in_one_tree_and_the_generic_build(tmp_path):
 
 # ---- an area emitter's radiance from a texture ------------------------------------------
 
-L0, L1 = np.array([4.0, 1.0, 0.5]), np.array([0.5, 2.0, 6.0])  # above 1: stored scaled
+L0, L1 = np.array([4.0, 1.0, 0.5]), np.array([0.5, 2.0, 6.0])  # above 1: an EXR holds them
 
 
 def radiance_bitmap(tmp_path: Path) -> str:
@@ -296,15 +297,17 @@ def rgb(name: str, c: np.ndarray) -> str:
     return f'<rgb name="{name}" value="{", ".join(map(str, c))}"/>'
 
 
-@pytest.mark.parametrize("variant", ["rgb", "spectral"])
-def test_textured_radiance_seen_directly(tmp_path, variant):
-    a, b = (render(tmp_path, emitter_plane(rgb("radiance", c)), variant, emitters="")
+def test_textured_radiance_seen_directly(tmp_path):
+    """In rgb a texture's colours are the radiance, as the constant colours are.  (Spectral
+    builds upsample a texture's colours as reflectances, clamped to [0, 1] and without D65,
+    and a checkerboard's <rgb> above 1 is refused, as in Mitsuba:
+    tests/test_spectral_emitter_textures.py.)"""
+    a, b = (render(tmp_path, emitter_plane(rgb("radiance", c)), "rgb", emitters="")
             for c in (L0, L1))
-    textures = [checker("radiance", L0, L1)]
-    if variant == "rgb":  # spectral fits a scaled image's texels, not each colour alone
-        textures.append(radiance_bitmap(tmp_path))
-    for tex in textures:
-        assert_regions(render(tmp_path, emitter_plane(tex), variant, emitters=""), a, b)
+    for tex in (checker("radiance", L0 / 6, L1 / 6), radiance_bitmap(tmp_path)):
+        scale = 6 if "checkerboard" in tex else 1
+        got = render(tmp_path, emitter_plane(tex), "rgb", emitters="")
+        assert_regions(got * scale, a, b)
 
 
 # the receiving point under a pinhole camera, below the emitter (the rectangle [-1, 1]^2
@@ -327,12 +330,25 @@ def _irradiance(x1: float, x2: float, y1: float, y2: float) -> float:
     return g(x2, y2) - g(x1, y2) - g(x2, y1) + g(x1, y1)
 
 
+def texel_value(rgb: np.ndarray, variant: str) -> np.ndarray:
+    """What the film records, in expectation, for an emitting bitmap's texel ``rgb``: as a
+    constant colour in rgb and mono; in spectral the sRGB of its upsampled reflectance
+    spectrum (clamped to [0, 1], no D65: Mitsuba's texture_d65 passes a texture through),
+    integrated over the sampled wavelengths."""
+    from test_envmap_variants import film_value
+
+    if variant != "spectral":
+        return film_value(rgb, variant)
+    u = (np.arange(1 << 16) + 0.5) / (1 << 16)
+    lam, w = S.sample_wavelengths(u)
+    spec = S.eval_coeffs(S.rgb_to_coeffs(np.asarray(rgb, np.float64)), lam)
+    return S.spectrum_to_srgb(spec, lam, w).mean(axis=0)
+
+
 @pytest.mark.parametrize("variant", ["mono", "rgb", "spectral"])
 def test_textured_radiance_lights_a_plane(tmp_path, variant):
     """Emitter sampling and BSDF sampling both look the radiance up at the uv of the point
     they reach: the plane's brightness is the analytic sum over the checker's regions."""
-    from test_envmap_variants import film_value
-
     light = (f'<shape type="rectangle"><transform name="to_world"><rotate x="1" angle="180"/>'
              f'<translate z="1"/></transform><emitter type="area">'
              f'{radiance_bitmap(tmp_path)}</emitter></shape>')
@@ -355,5 +371,5 @@ def test_textured_radiance_lights_a_plane(tmp_path, variant):
     got = scene.render(seed=2).mean(axis=(0, 1))
     e0 = _irradiance(0, 1, -1, 0) + _irradiance(-1, 0, 0, 1)
     e1 = _irradiance(0, 1, 0, 1) + _irradiance(-1, 0, -1, 0)
-    expected = 0.5 / math.pi * (e0 * film_value(L0, variant) + e1 * film_value(L1, variant))
+    expected = 0.5 / math.pi * (e0 * texel_value(L0, variant) + e1 * texel_value(L1, variant))
     np.testing.assert_allclose(got, expected, rtol=1.5e-2)

@@ -10,8 +10,10 @@ sets a colour stores them as the variant stores colours (runtime/render/colors.p
 sets a Float parameter (``alpha``...) is a separate instance whose texels stay linear RGB,
 which its ``eval_1`` reads (Mitsuba's single-channel lookup: their luminance; a checkerboard's
 colours give the one value of Mitsuba's ``srgb`` texture, ``srgb_eval_1``), and one that
-sets emitted light (an area emitter's ``radiance``) another, whose lookups are emitted
-colours (``illuminant``: times D65 in spectral builds, as Mitsuba's ``texture_d65``).
+sets emitted light (an area emitter's ``radiance``) another, refusing the kinds that cannot
+emit yet, whose lookups are reflectance-like colours as Mitsuba's ``texture_d65`` passes a
+texture through: spectral builds upsample its colours (clamped to [0, 1], as
+``srgb_model_fetch``) without D65, unlike a constant emitted colour.
 A ``volume`` texture's voxels are stored as a bitmap's texels, x fastest, then y, then z
 (runtime/scene/volumes.py reads them; ``stdlib/texture/volume.rdsl`` looks them up).
 Lookups, filtering and wrapping happen in rdsl (``stdlib/texture/bitmap.rdsl``); Python only
@@ -41,7 +43,8 @@ from .declared import declared_instance, needs_eval_1
 BITMAP_FILTERS = {"bilinear": 0, "nearest": 1}
 BITMAP_WRAPS = {"repeat": 0, "mirror": 1, "clamp": 2}
 # what a texture may set: a colour (a reflectance), a Float parameter (its eval_1), or
-# emitted light (an area emitter's radiance: spectral builds upsample it times D65)
+# emitted light (an area emitter's radiance: stored as a colour, as Mitsuba's texture_d65
+# passes a texture through; only the kinds that cannot emit yet are refused)
 USAGES = ("colour", "scalar", "emitted")
 
 
@@ -193,7 +196,8 @@ class TextureTable:
         name = plugin.id or plugin.type
         emitted = usage == "emitted"
         if getattr(plugin, "decl", None) is not None:  # its textures are nested ones
-            return declared_instance(plugin, self, illuminant=emitted)
+            # a texture's constant colours are reflectances wherever it is used
+            return declared_instance(plugin, self, illuminant=False)
         if plugin.type == "mesh_attribute":  # its values: fill_attributes(), once meshes are
             if emitted:
                 raise CompileError(f"{what}: a mesh_attribute texture cannot set emitted "
@@ -219,9 +223,9 @@ class TextureTable:
             offset, w, h, mean, scale = self._image(p["filename"], bool(p["raw"]), plugin,
                                                     usage)
             params.update(offset=offset, width=w, height=h,
-                          average=SpectrumValue(mean, None, emitted),
+                          average=SpectrumValue(mean, None, False),
                           filter=BITMAP_FILTERS[p["filter_type"]],
-                          wrap=BITMAP_WRAPS[p["wrap_mode"]], emitted=emitted, scale=scale)
+                          wrap=BITMAP_WRAPS[p["wrap_mode"]], emitted=False, scale=scale)
         return Instance(plugin.type, params, name)
 
     def _colour(self, value: Any, what: str, n: str, usage: str, loc: Any
@@ -239,8 +243,7 @@ class TextureTable:
             got = getattr(value, "category", type(value).__name__)
             raise CompileError(f"{what}: expected a colour (float, rgb or spectrum) or a "
                                f"texture, got {got}", loc)
-        return {f"color{n}": spectrum_value(value, what, illuminant=usage == "emitted",
-                                            loc=loc),
+        return {f"color{n}": spectrum_value(value, what, loc=loc),
                 f"rgb{n}": tuple(float(x) for x in rgb),
                 f"spectral_mean{n}": float(srgb_model_mean(rgb))}
 
@@ -268,11 +271,10 @@ class TextureTable:
 
     def _image(self, filename: str, raw: bool, plugin: Any, usage: str
                ) -> tuple[int, int, int, tuple[float, float, float], float]:
-        """The image's place in ``T``, its mean and the scale its texels were divided by.
-        Emitted light is stored over ``scale`` = 2 max if its max exceeds 1 (else 1, as
-        Mitsuba stores an emission bitmap), so spectral builds fit coefficients to values
-        in [0, 1]."""
-        key = (str(Path(filename).resolve()), raw, usage)
+        """The image's place in ``T``, its mean and the scale its texels were divided by
+        (1: emitted light is stored as a colour, as Mitsuba's bitmap stores it wherever it
+        is used; spectral builds clamp its texels to [0, 1] when they fit coefficients)."""
+        key = (str(Path(filename).resolve()), raw, "scalar" if usage == "scalar" else "colour")
         if key not in self._images:
             try:
                 img = load_bitmap(filename, raw)
@@ -281,10 +283,7 @@ class TextureTable:
                                    plugin.loc) from None
             h, w = img.shape[:2]
             mean = tuple(float(x) for x in img.reshape(-1, 3).mean(axis=0))
-            peak = float(img.max()) if img.size else 0.0
-            scale = 2.0 * peak if usage == "emitted" and peak > 1.0 else 1.0
-            texels = img.reshape(-1) if scale == 1.0 else img.reshape(-1) / np.float32(scale)
-            self._images[key] = (self._count, w, h, mean, scale)
-            self._texels.append((texels, usage != "scalar"))
+            self._images[key] = (self._count, w, h, mean, 1.0)
+            self._texels.append((img.reshape(-1), usage != "scalar"))
             self._count += w * h
         return self._images[key]

@@ -319,6 +319,13 @@ class _Builder(ShapeFinisher, Finishers):
             if min(value.rgb) < 0:  # a single negative value is kept for angles (fconst)
                 raise scene_error(f"<{kind} name=\"{name}\">: a color must be non-negative, "
                                   f"got {value.rgb[0]:g}", loc)
+            if (kind == "rgb" and (node.category, node.type) == ("texture", "checkerboard")
+                    and max(value.rgb) > 1):
+                # Mitsuba's checkerboard takes an <rgb> as a reflectance (srgb, bounded)
+                raise scene_error(f"<rgb name=\"{name}\"> of {self.what(node)}: a "
+                                  "checkerboard's rgb colour is a reflectance, in [0, 1], got "
+                                  f"{', '.join(f'{v:g}' for v in value.rgb)} (give a "
+                                  "<spectrum> or a <float> for a brighter one)", loc)
             if node.category == "emitter":  # a constant <spectrum>: flat, not grey
                 return flat_emission(value) if kind == "spectrum" else value
             return as_reflectance(value, name)  # pairs seen under D65, as Mitsuba's
