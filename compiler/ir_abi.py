@@ -5,18 +5,8 @@ from __future__ import annotations
 
 from typing import Any
 
-from .ir import (
-    BufferType,
-    MatType,
-    ScalarType,
-    SpectrumType,
-    StructType,
-    TupleType,
-    Type,
-    UnpolarizedType,
-    VecType,
-    components,
-)
+from . import ir
+from .ir import ScalarType, Type
 
 
 def type_to_json(t: Type) -> dict[str, Any]:
@@ -26,20 +16,20 @@ def type_to_json(t: Type) -> dict[str, Any]:
     order, vector components x, y, z, w, matrix entries row-major."""
     if isinstance(t, ScalarType):
         return {"kind": "scalar", "dtype": t.name}
-    if isinstance(t, VecType):
+    if isinstance(t, ir.VecType):
         return {"kind": "vec", "n": t.n, "dtype": t.elem.name}
-    if isinstance(t, MatType):
+    if isinstance(t, ir.MatType):
         return {"kind": "mat", "n": t.n, "dtype": "f32"}
-    if isinstance(t, StructType):
+    if isinstance(t, ir.StructType):
         return {"kind": "struct", "name": t.name,
                 "fields": [[n, type_to_json(ft)] for n, ft in t.fields]}
-    if isinstance(t, TupleType):
+    if isinstance(t, ir.TupleType):
         return {"kind": "tuple", "elems": [type_to_json(e) for e in t.elems]}
-    if isinstance(t, BufferType):
+    if isinstance(t, ir.BufferType):
         return {"kind": "buffer", "dtype": t.elem.name}
-    if isinstance(t, UnpolarizedType):
+    if isinstance(t, ir.UnpolarizedType):
         return {"kind": "unpolarized"}
-    if isinstance(t, SpectrumType):
+    if isinstance(t, ir.SpectrumType):
         return {"kind": "spectrum"}
     raise TypeError(t)
 
@@ -48,9 +38,9 @@ def leaf_types(t: Type) -> list[ScalarType]:
     """The scalar leaves of a concrete type in flattening order (see :func:`type_to_json`)."""
     if isinstance(t, ScalarType):
         return [t]
-    if isinstance(t, BufferType):
+    if isinstance(t, ir.BufferType):
         return []
     out: list[ScalarType] = []
-    for c in components(t):
+    for c in ir.components(t):
         out.extend(leaf_types(c))
     return out
