@@ -118,8 +118,7 @@ class VecType(Type):
         return True
 
     def __str__(self) -> str:
-        base = f"vec{self.n}" if self.elem.name == "f32" else f"vec{self.n}<{self.elem}>"
-        return base
+        return f"vec{self.n}" if self.elem.name == "f32" else f"vec{self.n}<{self.elem}>"
 
 
 @dataclass(frozen=True)
@@ -416,8 +415,9 @@ class Instr:
         self.op = op
         self.operands = list(operands)
         self.results = [Value(t) for t in result_types]
+        ref = weakref.ref(self)  # one reference, shared by the results (what `owner=` makes)
         for r in self.results:
-            r.owner = self
+            r._owner = ref
         self.attrs = dict(attrs or {})
         self.regions = list(regions or [])
         self.loc = loc
@@ -454,10 +454,15 @@ class Block:
 
     def walk(self) -> Iterator[Instr]:
         """Every instruction in this block and nested regions, in program order."""
-        for ins in self.instrs:
-            yield ins
-            for r in ins.regions:
-                yield from r.walk()
+        stack = [iter(self.instrs)]  # not nested generators: they cost a step per level
+        while stack:
+            for ins in stack[-1]:
+                yield ins
+                if ins.regions:  # its regions' instructions, then the rest of this block
+                    stack.append(itertools.chain.from_iterable(r.instrs for r in ins.regions))
+                    break
+            else:
+                stack.pop()
 
 
 @dataclass
@@ -552,49 +557,25 @@ def clone_block(block: Block, mapping: dict[Value, Value]) -> Block:
     new = Block([Value(a.type, a.name) for a in block.args])
     for old_arg, new_arg in zip(block.args, new.args):
         mapping.setdefault(old_arg, new_arg)
-    for ins in block.instrs:
-        regions = [clone_block(r, mapping) for r in ins.regions]
-        c = Instr(ins.op, [mapping.get(v, v) for v in ins.operands],
-                  [r.type for r in ins.results], dict(ins.attrs), regions, ins.loc)
-        for o, n in zip(ins.results, c.results):
-            n.name = o.name
+    get, out = mapping.get, new.instrs
+    for ins in block.instrs:  # what Instr(...) does, without its copies (inlining's hot loop)
+        c = Instr.__new__(Instr)
+        c.op, c.attrs, c.loc = ins.op, dict(ins.attrs), ins.loc
+        c.regions = [clone_block(r, mapping) for r in ins.regions] if ins.regions else []
+        c.operands = [get(v, v) for v in ins.operands]
+        ref, c.results = weakref.ref(c), []
+        for o in ins.results:
+            n = Value(o.type, o.name)
+            n._owner = ref
+            c.results.append(n)
             mapping[o] = n
-        new.instrs.append(c)
+        out.append(c)
     return new
 
 
-def type_to_json(t: Type) -> dict[str, Any]:
-    """A JSON description of a (source-level) type, used by kernel manifests.
+def __getattr__(name: str) -> Any:  # what moved to ir_abi.py, still importable from here
+    if name in ("leaf_types", "type_to_json"):
+        from . import ir_abi
 
-    Leaves are flattened depth-first: struct fields in declaration order, tuple elements in
-    order, vector components x, y, z, w, matrix entries row-major."""
-    if isinstance(t, ScalarType):
-        return {"kind": "scalar", "dtype": t.name}
-    if isinstance(t, VecType):
-        return {"kind": "vec", "n": t.n, "dtype": t.elem.name}
-    if isinstance(t, MatType):
-        return {"kind": "mat", "n": t.n, "dtype": "f32"}
-    if isinstance(t, StructType):
-        return {"kind": "struct", "name": t.name,
-                "fields": [[n, type_to_json(ft)] for n, ft in t.fields]}
-    if isinstance(t, TupleType):
-        return {"kind": "tuple", "elems": [type_to_json(e) for e in t.elems]}
-    if isinstance(t, BufferType):
-        return {"kind": "buffer", "dtype": t.elem.name}
-    if isinstance(t, UnpolarizedType):
-        return {"kind": "unpolarized"}
-    if isinstance(t, SpectrumType):
-        return {"kind": "spectrum"}
-    raise TypeError(t)
-
-
-def leaf_types(t: Type) -> list[ScalarType]:
-    """The scalar leaves of a concrete type in flattening order (see :func:`type_to_json`)."""
-    if isinstance(t, ScalarType):
-        return [t]
-    if isinstance(t, BufferType):
-        return []
-    out: list[ScalarType] = []
-    for c in components(t):
-        out.extend(leaf_types(c))
-    return out
+        return getattr(ir_abi, name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

@@ -77,9 +77,67 @@ def tabulate(module: Module, options: dict[str, Any], params: dict[str, Any]) ->
     """The samples (float32) of the table function ``options["fn"]`` of ``module`` with its
     plugin parameters set to ``params`` (by name; missing ones take their defaults)."""
     fn = module.functions[options["fn"]]
-    kernel = _kernel(module, fn, bool(options.get("n")))
+    has_x = bool(options.get("n"))
+    names, text = _source(module, fn, has_x)
     xs = sample_points(options)
-    return kernel(xs, params)
+    path = _disk_entry(text, xs, params)
+    if path is not None and (got := _load(path, len(xs))) is not None:
+        return got
+    out = _kernel(module, names, text, fn, has_x)(xs, params)
+    if path is not None:
+        _store(path, out)
+    return out
+
+
+def _disk_entry(text: str, xs: np.ndarray, params: dict[str, Any]) -> Any:
+    """Where the samples of the table function printed as ``text`` at ``xs`` with
+    ``params`` are kept across processes (``<cache>/tables/<sha256>.npy``: a test suite or a
+    new scene loads the same plugin with the same values again), or None if a value is not
+    a plain number or None (a texture, a colour: left to the kernel call, which may diagnose
+    it; an entry exists only for inputs that computed without error).  The key: the
+    printed IR of the function and all it calls (their parameters' defaults included),
+    the points, the values, rdsl's version, the compiler's fingerprint and LLVM's."""
+    import hashlib
+    import platform
+
+    import llvmlite
+
+    from .. import __version__
+    from ..core.cachedir import cache_dir, compiler_fingerprint
+
+    plain = (bool, int, float, np.bool_, np.integer, np.floating)
+    if not all(v is None or isinstance(v, plain) for v in params.values()):
+        return None
+    h = hashlib.sha256()
+    for part in (__version__, compiler_fingerprint(), llvmlite.__version__,
+                 platform.machine(), text, xs.tobytes(), repr(sorted(params.items()))):
+        b = part if isinstance(part, bytes) else part.encode()
+        h.update(f"{len(b)}:".encode() + b)
+    return cache_dir() / "tables" / f"{h.hexdigest()}.npy"
+
+
+def _load(path: Any, n: int) -> np.ndarray | None:
+    try:
+        got = np.load(path, allow_pickle=False)
+    except (OSError, ValueError, EOFError):
+        return None
+    return got if got.dtype == np.float32 and got.shape == (n,) else None
+
+
+def _store(path: Any, samples: np.ndarray) -> None:
+    """Write atomically (a temporary file in the same folder, then a rename): another
+    process reads a whole entry or none."""
+    import os
+    import tempfile
+
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        fd, tmp = tempfile.mkstemp(dir=path.parent, suffix=".tmp")
+        with os.fdopen(fd, "wb") as f:
+            np.save(f, samples, allow_pickle=False)
+        os.replace(tmp, path)
+    except OSError:  # a read-only or full cache: the samples are still right
+        pass
 
 
 class _Kernel:
@@ -125,11 +183,17 @@ class _Kernel:
         return out
 
 
-def _kernel(module: Module, fn: Function, has_x: bool) -> _Kernel:
+def _source(module: Module, fn: Function, has_x: bool) -> tuple[list[str], str]:
+    """The functions the table kernel of ``fn`` is built from, and their printed IR: what
+    its code depends on (the key of :func:`_kernel` and of the samples on disk)."""
     from .printer import print_function
 
     names = _reachable(module, fn)
-    key = repr(has_x) + "".join(print_function(module.functions[n]) for n in names)
+    return names, repr(has_x) + "".join(print_function(module.functions[n]) for n in names)
+
+
+def _kernel(module: Module, names: list[str], key: str, fn: Function, has_x: bool
+            ) -> _Kernel:
     with _lock:
         k = _kernels.get(key)
         if k is None:

@@ -1,5 +1,6 @@
 """Where rdsl caches what it compiles: ``$RDSL_CACHE_DIR``, default ``~/.cache/rdsl`` (kernel
-libraries, runtime/cache.py; parsed sources, dsl/parser.py)."""
+libraries, runtime/cache.py; parsed sources, dsl/parser.py; table samples,
+compiler/precompute.py)."""
 
 from __future__ import annotations
 

@@ -87,8 +87,7 @@ class _ModuleLowering:
     def splat(self, b: L.IRBuilder, v: L.Value, n: int) -> L.Value:
         vty = L.VectorType(v.type, n)
         ins = b.insert_element(L.Constant(vty, None), v, const(I32, 0))
-        return b.shuffle_vector(ins, L.Constant(vty, None), L.Constant(L.VectorType(I32, n),
-                                                                      [0] * n))
+        return b.shuffle_vector(ins, L.Constant(vty, None), const(L.VectorType(I32, n), 0))
 
     def guarded_load(self, b: L.IRBuilder, p: L.Value, ty: L.Type, align: int,
                      m: L.Value) -> L.Value:

@@ -55,11 +55,22 @@ def with_elem(t: L.Type, elem: L.Type) -> L.Type:
     return L.VectorType(elem, t.count) if isinstance(t, L.VectorType) else elem
 
 
+_SPLATS: dict[tuple[int, str, str], L.Constant] = {}  # (lanes, element type, value) -> splat
+
+
 def const(ty: L.Type, value) -> L.Constant:
-    """A (splatted) constant of LLVM type ``ty``."""
+    """A (splatted) constant of LLVM type ``ty``.  Splats are shared: llvmlite formats a
+    constant's text once per object, and a kernel uses the same few splats thousands of
+    times (the text is the same either way)."""
     if isinstance(ty, L.VectorType):
         c = const(ty.element, value)
-        return L.Constant(ty, [c] * ty.count)
+        key = (ty.count, str(ty.element), c.get_reference())
+        splat = _SPLATS.get(key)
+        if splat is None:
+            if len(_SPLATS) > 4096:  # a long-lived process: bounded
+                _SPLATS.clear()
+            splat = _SPLATS[key] = L.Constant(ty, [c] * ty.count)
+        return splat
     if isinstance(ty, L.FloatType):
         with np.errstate(over="ignore"):  # round to f32 exactly once; overflow gives inf
             return L.Constant(ty, float(np.float32(value)))

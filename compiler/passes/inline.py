@@ -18,7 +18,7 @@ from __future__ import annotations
 from collections.abc import Callable
 
 from ..diagnostics import CompileError, Diagnostic
-from ..ir import Block, Function, Instr, Module, Op, Value, clone_block, replace_uses
+from ..ir import Block, Function, Instr, Module, Op, Value, clone_block
 from . import Pass, register
 
 
@@ -68,15 +68,19 @@ class Inline(Pass):
             self.mark_partials = fn.attrs.get("source_name") not in helpers
         self._inline_block(fn.body, mapping)
         self.mark_partials = marking
-        replace_uses(fn.body, mapping)
         self.stack.pop()
         self.done.add(fn.name)
 
     def _inline_block(self, block: Block, mapping: dict[Value, Value]) -> None:
+        """Inline the calls of ``block``; ``mapping`` takes each inlined call's results to
+        the values its body returned.  Uses come after definitions, so each instruction of
+        the caller is renamed when reached (the inlined copies hold none of the results)."""
         out: list[Instr] = []
         for ins in block.instrs:
             for region in ins.regions:
                 self._inline_block(region, mapping)
+            if mapping:
+                ins.operands = [mapping.get(v, v) for v in ins.operands]
             if ins.op is not Op.CALL:
                 out.append(ins)
                 continue
@@ -88,7 +92,7 @@ class Inline(Pass):
             if callee.name in self.keep:
                 out.append(ins)
                 continue
-            args = [mapping.get(v, v) for v in ins.operands]
+            args = ins.operands  # renamed above
             local = {p.value: a for p, a in zip(callee.params, args)}
             body = clone_block(callee.body, local)
             ret = body.instrs.pop()

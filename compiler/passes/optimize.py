@@ -158,8 +158,12 @@ class _Maybe:
         return True
 
 
+_NO_ATTRS = _attr_key({})  # most instructions have none: no call, the same key
+
+
 def _cse_key(ins: Instr) -> tuple[Any, ...]:
-    return ins.op, tuple(ins.operands), _attr_key(ins.attrs), ins.result.type
+    attrs = _attr_key(ins.attrs) if ins.attrs else _NO_ATTRS
+    return ins.op, tuple(ins.operands), attrs, ins.results[0].type
 
 
 class _Simplifier:

@@ -7,7 +7,7 @@ Guarantees: every value is a scalar or a buffer.  ``make``/``extract``/``insert`
 ``if``/``loop`` carry and yield leaves.  Parameters of aggregate type became one parameter
 per leaf named by its path (``si.p.x``), and ``Function.attrs["abi_params"]`` /
 ``["abi_result"]`` record the source-level structure for kernel manifests.  Leaf order is
-the one of :func:`rdsl.compiler.ir.type_to_json`.
+the one of :func:`rdsl.compiler.ir_abi.type_to_json`.
 """
 
 from __future__ import annotations
@@ -30,9 +30,8 @@ from ..ir import (
     Value,
     VecType,
     components,
-    leaf_types,
-    type_to_json,
 )
+from ..ir_abi import leaf_types, type_to_json
 from . import Pass, register
 
 _VEC_NAMES = "xyzw"

@@ -1,0 +1,107 @@
+"""What makes compiles cheaper must not change what they produce: the IR walk's order, the
+clone's values, and the table samples kept on disk across processes (keyed by the printed
+IR, the values and the compiler, written atomically under the cache folder only)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from rdsl.compiler import precompute
+from rdsl.compiler.driver import STDLIB, frontend
+from rdsl.compiler.ir import Block, clone_block
+from rdsl.compiler.precompute import table_params, tabulate
+from rdsl.core.scene_spec import Instance, TextureRef
+
+
+def _recursive_walk(block: Block):
+    for ins in block.instrs:
+        yield ins
+        for r in ins.regions:
+            yield from _recursive_walk(r)
+
+
+@pytest.fixture(scope="module")
+def roughplastic():
+    return frontend(STDLIB / "bsdf" / "roughplastic.rdsl")
+
+
+def test_walk_is_program_order_through_nested_regions(roughplastic):
+    nested = 0
+    for fn in roughplastic.functions.values():
+        got = list(fn.walk())
+        assert got == list(_recursive_walk(fn.body)), fn.name
+        nested += sum(1 for i in got if i.regions and any(r.instrs for r in i.regions))
+    assert nested > 10  # the check went through ifs and loops
+
+
+def test_walk_sees_a_region_replaced_while_walking():
+    module = frontend(STDLIB / "bsdf" / "roughplastic.rdsl")  # its own: this one is cut
+    fn = next(f for f in module.functions.values()
+              if any(len(i.regions) == 2 for i in f.body.instrs))
+    seen = []
+    for ins in fn.walk():
+        seen.append(ins)
+        if len(ins.regions) == 2 and ins.regions[1].instrs:
+            ins.regions[1].instrs = ins.regions[1].instrs[-1:]  # only the yield left
+    assert seen == list(_recursive_walk(fn.body))
+
+
+def test_clone_maps_every_value(roughplastic):
+    fn = max(roughplastic.functions.values(), key=lambda f: sum(1 for _ in f.walk()))
+    mapping = {p.value: p.value for p in fn.params}
+    copy = clone_block(fn.body, mapping)
+    old, new = list(_recursive_walk(fn.body)), list(_recursive_walk(copy))
+    assert len(old) == len(new)
+    for a, b in zip(old, new):
+        assert (a.op, a.attrs, a.loc) == (b.op, b.attrs, b.loc) and a is not b
+        assert [mapping.get(v, v) for v in a.operands] == b.operands
+        assert [(r.type, r.name) for r in a.results] == [(r.type, r.name) for r in b.results]
+        assert all(r.owner is b for r in b.results) and all(mapping[r] is s for r, s in
+                                                             zip(a.results, b.results))
+        assert b.attrs is not a.attrs
+
+
+def _table(module, alpha):
+    read = module.functions["roughplastic.external_transmittance.read"]
+    params = table_params(read, Instance("roughplastic", {"alpha": alpha}))
+    return read.attrs["table"], params
+
+
+def test_table_samples_are_kept_on_disk(roughplastic, tmp_path, monkeypatch):
+    monkeypatch.setenv("RDSL_CACHE_DIR", str(tmp_path))
+    opts, params = _table(roughplastic, 0.3)
+    first = tabulate(roughplastic, opts, params)
+    entries = list((tmp_path / "tables").iterdir())
+    assert [p.suffix for p in entries] == [".npy"]  # one entry, no temporary file left
+    assert all(p.parent == tmp_path / "tables" for p in tmp_path.rglob("*.npy"))
+
+    def no_kernel(*a, **k):
+        raise AssertionError("compiled although the samples are on disk")
+
+    with monkeypatch.context() as mp:  # a hit reads the file: no kernel is built or run
+        mp.setattr(precompute, "_kernel", no_kernel)
+        again = tabulate(roughplastic, opts, params)
+        assert again.tobytes() == first.tobytes() and again.dtype == np.float32
+        with pytest.raises(AssertionError, match="compiled"):  # other values: another key
+            tabulate(roughplastic, *_table(roughplastic, 0.31))
+    entries[0].write_bytes(b"not an array")  # a damaged entry is computed again
+    assert tabulate(roughplastic, opts, params).tobytes() == first.tobytes()
+    assert np.load(entries[0]).tobytes() == first.tobytes()
+
+
+def test_table_key_follows_the_code_and_values(roughplastic, tmp_path, monkeypatch):
+    monkeypatch.setenv("RDSL_CACHE_DIR", str(tmp_path))
+    opts, params = _table(roughplastic, 0.3)
+    fn = roughplastic.functions[opts["fn"]]
+    _, text = precompute._source(roughplastic, fn, True)
+    xs = precompute.sample_points(opts)
+    key = precompute._disk_entry(text, xs, params)
+    assert key.parent == tmp_path / "tables"
+    assert precompute._disk_entry(text + " ", xs, params) != key  # the code
+    assert precompute._disk_entry(text, xs[:-1], params) != key  # the points
+    assert precompute._disk_entry(text, xs, dict(params, alpha=0.3000001)) != key
+    from rdsl.core import cachedir
+    monkeypatch.setattr(cachedir, "compiler_fingerprint", lambda: "another compiler")
+    assert precompute._disk_entry(text, xs, params) != key  # the compiler
+    # a texture: what the kernel call diagnoses, never read from disk
+    assert precompute._disk_entry(text, xs, dict(params, alpha=TextureRef(0))) is None
