@@ -35,7 +35,8 @@ if TYPE_CHECKING:
     from ...core.scene_spec import Instance
     from .renderer import SceneBuffers
 
-__all__ = ["SCENE_BUFFERS", "kernel_source", "literal", "scene_plugins"]
+__all__ = ["SCENE_BUFFERS", "film_channels", "kernel_source", "literal",
+           "scene_plugins"]
 
 TEMPLATE = Path(__file__).resolve().parents[2] / "stdlib" / "render" / "kernel.rdsl.in"
 ADJOINT = TEMPLATE.with_name("adjoint.rdsl.in")  # appended for scene.backward
@@ -209,6 +210,16 @@ def _film_holes(film: dict[str, Any]) -> dict[str, str]:
     }
 
 
+def film_channels(desc: Any, model: ColorModel, derivative: bool = False) -> list[str]:
+    """The channels the scene's film accumulates, in order: the colour in the variant's own
+    channels (Y, or R, G, B), A if the film's ``pixel_format`` has alpha, the integrator's
+    AOV channels, then, for a derivative, its colour channels (``d.R``...)."""
+    base = ["Y"] if model.mono else ["R", "G", "B"]
+    return base + ["A"] * film_format(desc.sensor.film, model.mono)[1] + \
+        integrator_plan(desc.integrator).aov_channel_names() + \
+        [f"d.{c}" for c in base if derivative]
+
+
 def _adjoint_source(film: dict[str, Any], model: ColorModel, value_type: str) -> str:
     """``render_sample_loss`` (stdlib/render/adjoint.rdsl.in) for the scene's film: one
     line per pixel a sample reaches, adding its weight times D's value there."""
@@ -218,7 +229,7 @@ def _adjoint_source(film: dict[str, Any], model: ColorModel, value_type: str) ->
     n = film_reach(film)
     m, c, row = 2 * n + 1, 1 if model.mono else 3, film["grid_w"] + 2 * n
     make = {"Vec3": "Vec3", "Unpolarized": "Unpolarized"}.get(value_type, "Spectrum")
-    taps = ["    let b = %d * q;" % c]
+    taps = [f"    let b = {c} * q;"]
     for dy in range(m):
         for dx in range(m):
             at = c * (dy * row + dx)
@@ -256,8 +267,8 @@ def kernel_source(desc: Any, bufs: SceneBuffers, bsdfs: list[Instance],
              if mono_pol else "L")
     if derivative:
         aov_fields.append((value_type, f"derivative({value})"))
-    film = film_uniforms(desc.sensor.film, 1, channels=channels * (1 + derivative) + alpha
-                         + len(plan.aov_channel_names()))
+    film = film_uniforms(desc.sensor.film, 1,
+                         channels=len(film_channels(desc, model, derivative)))
     seed_rng = (["    let (rng, u_wavelength) = next_1d(pcg32_seed(UInt64(seed), stream));",
                  "    let wavelength_weight = sample_wavelengths(u_wavelength);"] if spectral
                 else ["    let rng = pcg32_seed(UInt64(seed), stream);"])

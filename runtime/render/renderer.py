@@ -44,7 +44,7 @@ from .film import (COLOUR_CHANNELS, colour_image, develop, film_format, film_uni
                    new_accumulator)
 from .flatten import SceneBuffers, flatten
 from .integrators import integrator_instances, integrator_plan
-from .kernel_source import kernel_source, scene_plugins
+from .kernel_source import film_channels, kernel_source, scene_plugins
 from .progress import Progress
 from .shapes import FLAGS as SHAPE_FLAGS
 from .shapes import INSTANCED, INSTANCED_KIND
@@ -336,10 +336,7 @@ class Scene:
     @property
     def _film_channels(self) -> list[str]:
         """The channels the film accumulates (the colour in the variant's own channels)."""
-        base = ["Y"] if self.build.model.mono else ["R", "G", "B"]
-        return base + ["A"] * self._film_format[1] + \
-            integrator_plan(self.desc.integrator).aov_channel_names() + \
-            [f"d.{c}" for c in base if self.derivative]
+        return film_channels(self.desc, self.build.model, self.derivative)
 
     def render(self, spp: int | None = None, seed: int | None = None,
                threads: int | None = None, progress: bool = False,
