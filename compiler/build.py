@@ -30,6 +30,9 @@ class Build:
     # reverse mode: iterations of a loop whose carried state the adjoint kernel checkpoints
     # per lane (0: it recomputes the state from the start; passes/ad_reverse.py)
     tape: int = 0
+    # reverse mode: the loads differentiated, None for all: elements of the generic build's
+    # parameter buffer PRM, and "T" for the texel buffer (passes/ad_reverse.py)
+    seeds: tuple[int | str, ...] | None = None
 
     @classmethod
     def of(cls, target: str | Target = "host", variant: str | ColorModel = "rgb",

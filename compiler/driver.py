@@ -52,7 +52,7 @@ def pipeline(build: Build, scene: SceneSpec | None = None,
         Scalarize(),  # aggregates become scalars; kernel ABI recorded
         Optimize(),  # forward extracts, CSE the leaves
         # tangents (forward mode), adjoints (reverse), or derivative() = 0 without AD
-        AdReverse(build.tape) if build.ad == "reverse" else AdForward(build.ad),
+        AdReverse(build.tape, build.seeds) if build.ad == "reverse" else AdForward(build.ad),
         # reverse mode, if asked: the sweeps read eliminated edge weights, not primal values
         *([Eliminate(build.eliminate)] if build.eliminate else []),
         Vectorize(build.width),  # SPMD over lanes with masks

@@ -34,7 +34,10 @@ and all with ``tape`` 0, recompute from the initial values (k bodies: quadratic 
 docs/ad.md).  The adjoints of the outer values a loop body reads are carried by the
 adjoint loop and added after it.
 Integers, comparisons, ``floor``/``ceil``, loads from other buffers and ray hits have no
-derivative (as in ``ad_forward``).
+derivative (as in ``ad_forward``).  A build with ``seeds`` (``Build.seeds``: the scene
+parameters ``backward`` asks for) differentiates only the loads of those parameters
+(``_Reverse``): the others are constants to the sweep, which gets shorter, and so does the
+tape.
 """
 
 from __future__ import annotations
@@ -73,19 +76,25 @@ _NO_DERIVATIVE = {Op.FLOOR, Op.CEIL, Op.CAST, Op.BITCAST, Op.CONST, Op.LOAD, Op.
 class AdReverse(Pass):
     name = "ad_reverse"
 
-    def __init__(self, tape: int = 0) -> None:
+    def __init__(self, tape: int = 0, seeds: tuple[int | str, ...] | None = None) -> None:
         self.tape = tape  # iterations checkpointed per loop (0: recompute from the start)
+        self.seeds = seeds  # the loads differentiated (None: every one; see _Reverse)
 
     def run(self, module: Module) -> None:
         for fn in module.functions.values():
-            _Reverse(fn, self.tape).run()
+            _Reverse(fn, self.tape, self.seeds).run()
 
 
 class _Reverse:
-    """The adjoint of one function."""
+    """The adjoint of one function.  ``seeds``: None differentiates every load from ``PRM``
+    and ``T``; otherwise only the loads from ``PRM`` at a constant element it names and,
+    if it holds ``"T"``, the loads from ``T`` (the scene parameters ``backward`` was asked
+    for: no adjoint code for the others)."""
 
-    def __init__(self, fn: Function, cap: int = 0) -> None:
+    def __init__(self, fn: Function, cap: int = 0,
+                 seeds: tuple[int | str, ...] | None = None) -> None:
         self.fn = fn
+        self.seeds = None if seeds is None else frozenset(seeds)
         self.tape = Checkpoints(cap)  # the loops' carried state (cap 0: none)
         # a differentiated buffer (PRM, T) -> its gradient buffer and row
         self.bufs: dict[Value, tuple[Value, Value]] = {
@@ -201,7 +210,7 @@ class _Reverse:
     def _varied_results(self, ins: Instr) -> list[Value]:
         op, V = ins.op, self.varied
         if op is Op.LOAD:
-            return [ins.result] if ins.operands[0] in self.bufs else []
+            return [ins.result] if self._seed_load(ins) else []
         if op is Op.IF:
             return [r for i, r in enumerate(ins.results) if r.type == F32 and any(
                 reg.instrs[-1].operands[i] in V for reg in ins.regions)]
@@ -218,6 +227,19 @@ class _Reverse:
         if ins.result in self.detached:
             return []
         return [ins.result] if any(v in V for v in ins.operands) else []
+
+    def _seed_load(self, ins: Instr) -> bool:
+        """Whether load ``ins`` is differentiated (see ``seeds``)."""
+        buf = ins.operands[0]
+        if buf not in self.bufs:
+            return False
+        if self.seeds is None:
+            return True
+        if buf.name == TEXEL_BUFFER:
+            return TEXEL_BUFFER in self.seeds
+        index = ins.operands[1].owner
+        return isinstance(index, Instr) and index.op is Op.CONST and \
+            index.attrs["value"] in self.seeds
 
     def _count_loops(self, block: Block) -> None:
         """Give each loop that carries an active value a trip counter (its last carried

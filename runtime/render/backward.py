@@ -33,7 +33,7 @@ from ...compiler.build import elimination_threshold
 from ...compiler.diagnostics import CompileError
 from ...core.scene_spec import Slot
 from ..scene.samplers import sample_count
-from .differentiable import Texels, _lookup, ad_twin
+from .differentiable import Texels, _lookup, ad_twin, adjoint_seeds
 from .film import film_reach, film_uniforms
 from .kernel_source import SCENE_BUFFERS
 
@@ -105,7 +105,8 @@ def backward(scene: Scene, d_img: Any, params: list[str], spp: int | None = None
     seed = scene.seed if seed is None else int(seed)
     scene.use_generic()
     D = _pixel_adjoints(scene, d, spp, seed, threads)
-    twin = ad_twin(scene, "reverse", elimination_threshold("reverse", eliminate), tape)
+    twin = ad_twin(scene, "reverse", elimination_threshold("reverse", eliminate), tape,
+                   adjoint_seeds(chosen))
     mod = twin.compile()
     if mod.traces_rays:
         mod.bind_scene(scene.embree)

@@ -180,25 +180,48 @@ def _check_tables(scene: Scene, name: str) -> None:
                                "value (a -D default or the XML)")
 
 
-def ad_twin(scene: Scene, ad: str, eliminate: int = 0, tape: int = 0) -> Scene:
+def ad_twin(scene: Scene, ad: str, eliminate: int = 0, tape: int = 0,
+            seeds: tuple[int | str, ...] | None = None) -> Scene:
     """The scene's twin for differentiation mode ``ad``: same description and buffers, a
     generic build with tangents ("forward": its film also takes the derivative of the
     radiance) or adjoints ("reverse": runtime/render/backward.py; ``eliminate``: the
     threshold of graph elimination, 0 for none; ``tape``: bounces checkpointed per lane,
-    0 to recompute them all)."""
-    attr = f"_{ad}" + (f"_e{eliminate}" if eliminate else "") + (f"_t{tape}" if tape else "")
+    0 to recompute them all; ``seeds``: the parameters differentiated, None for all, see
+    :func:`adjoint_seeds`)."""
+    attr = f"_{ad}" + (f"_e{eliminate}" if eliminate else "") + (f"_t{tape}" if tape else "") \
+        + (f"_s{hash(seeds)}" if seeds is not None else "")
     twin = getattr(scene, attr, None)
     if twin is None or twin.desc is not scene.desc:
         from .renderer import Scene as SceneClass
 
         twin = SceneClass.__new__(SceneClass)
         twin.__dict__.update(scene.__dict__)
-        twin.build = Build(scene.build.target, scene.build.model, ad, eliminate, tape)
+        twin.build = Build(scene.build.target, scene.build.model, ad, eliminate, tape, seeds)
         twin.specialize, twin.derivative, twin._prm_set = False, ad == "forward", True
         twin._module = None
         twin._forward = twin._reverse = None
         setattr(scene, attr, twin)
     return twin
+
+
+def seeds_of(scene: Scene, names: list[str]) -> tuple[int | str, ...] | None:
+    """``Build.seeds`` of an adjoint kernel for the parameters ``names`` of ``scene``."""
+    return adjoint_seeds({n: _lookup(scene.params.slots, n)[1] for n in names})
+
+
+def adjoint_seeds(chosen: dict[str, Slot | Texels]) -> tuple[int | str, ...] | None:
+    """The loads an adjoint kernel for the parameters ``chosen`` differentiates
+    (``Build.seeds``): their elements of ``PRM``, and ``"T"`` if texels are among them; None
+    (every load) if one is a tabulated spectrum, which is read at computed elements."""
+    elements: set[int] = set()
+    for slot in chosen.values():
+        if isinstance(slot, Texels):
+            continue
+        if slot.table:
+            return None
+        elements.update(range(slot.offset, slot.offset + slot.size))
+    texels = any(isinstance(slot, Texels) for slot in chosen.values())
+    return (*sorted(elements), *(("T",) if texels else ()))
 
 
 def render_forward(scene: Scene, name: str, spp: int | None = None, seed: int | None = None,
