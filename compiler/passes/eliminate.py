@@ -5,7 +5,8 @@ Runs right after it in a ``reverse`` build that asks for it (``Build.of(..., eli
 a threshold of 0 (or a build without it) leaves the IR exactly as ``ad_reverse`` made it.
 
 Guarantees: the same adjoints up to float rounding, with the sweep of each block (a kernel's
-body, one iteration of an adjoint loop) reading fewer values of its forward part.
+body, one iteration of an adjoint loop) reading no more values of its forward part than
+before (a function whose elimination would make one sweep read more is left as it was).
 
 The sweep is linear in the adjoints: each of its instructions that computes an adjoint from
 adjoints (``add``/``sub``/``neg`` of adjoints, ``mul`` of an adjoint by a primal value,
@@ -38,16 +39,18 @@ for some more arithmetic in the forward part.  ``bench/ad_eliminate.py`` counts 
 
 from __future__ import annotations
 
+import dataclasses
 import heapq
 import sys
 from typing import Union
 
-from ..ir import F32, PURE_OPS, Block, Builder, Function, Instr, Module, Op, Value, replace_uses
+from ..ir import F32, PURE_OPS, Block, Builder, Function, Instr, Module, Op, Value, \
+    clone_block, replace_uses
 from . import Pass, register
 from .ad_reverse import DIFFERENTIATED, GUARD, SWEEP, zero_guard
 
 GRADIENTS = {grad for grad, _ in DIFFERENTIATED.values()}  # gPRM, gT
-from .ad_tape import sweep_blocks
+from .ad_tape import sweep_blocks, tape
 
 DEFAULT_THRESHOLD = 10
 
@@ -75,10 +78,22 @@ class Eliminate(Pass):
         sys.setrecursionlimit(max(limit, 20000))  # weights are products of long chains
         try:
             for fn in module.functions.values():
-                for blk, m in sweep_blocks(fn):
-                    _Sweep(fn, blk, m, self.threshold).run()
+                self._function(fn)
         finally:
             sys.setrecursionlimit(limit)
+
+    def _function(self, fn: Function) -> None:
+        """Eliminate on a copy of ``fn``'s body; keep it unless some sweep of it would read
+        more forward values than before (greedy elimination can make a product of weights
+        that needs more than the partials it replaced)."""
+        if not sweep_blocks(fn):
+            return
+        trial = dataclasses.replace(fn, body=clone_block(fn.body, {}))
+        for blk, m in sweep_blocks(trial):
+            _Sweep(trial, blk, m, self.threshold).run()
+        before, after = _tape_values(fn), _tape_values(trial)
+        if all(a <= b for a, b in zip(after, before)):
+            fn.body = trial.body
 
 
 class _Sweep:
@@ -366,6 +381,12 @@ class _Sweep:
                 v = zero_guard(b, x, v)  # a zero partial upstream: 0 even through an infinite one
         memo[w] = v
         return v
+
+
+def _tape_values(fn: Function) -> list[int]:
+    """The forward values each sweep of ``fn`` reads (measured on a copy: ``tape`` runs
+    DCE)."""
+    return [t.values for t in tape(dataclasses.replace(fn, body=clone_block(fn.body, {})))]
 
 
 def _mul(a: W, b: W) -> W:
