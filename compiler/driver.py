@@ -47,7 +47,8 @@ def pipeline(build: Build, scene: SceneSpec | None = None,
         Evaluate(report=report),  # pure calls with constant arguments: run once, now
         Inline(build.ad is not None),  # the calls left become bodies; recursion is a diagnostic
         Optimize(),  # fold the evaluated constants through
-        Lift(build.model),  # Spectrum becomes mono/rgb; `if const` traits become constants
+        Lift(build.model, build.ad is not None),  # Spectrum becomes mono/rgb/...; `if const`
+        # traits become constants
         Optimize(),  # fold the trait branches away
         Scalarize(),  # aggregates become scalars; kernel ABI recorded
         Optimize(),  # forward extracts, CSE the leaves

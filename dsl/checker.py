@@ -72,7 +72,8 @@ __all__ = [
 
 
 # `wavelengths`: a spectral build whose kernel sets its wavelengths (compiler/passes/lift/driver.py)
-TRAITS = ("mono", "rgb", "spectral", "polarized", "wavelengths")
+# `differentiated`: a build with derivatives (ad forward or reverse: compiler/build.py)
+TRAITS = ("mono", "rgb", "spectral", "polarized", "wavelengths", "differentiated")
 
 
 

@@ -260,9 +260,6 @@ def _end_of(tok: Token) -> tuple[int, int]:
 # --------------------------------------------------------------------------------------
 # Tree -> AST
 
-_TRAITS = ("mono", "rgb", "spectral", "polarized")
-
-
 @v_args(meta=True)
 class _ToAst(Transformer):
     """Builds :mod:`ast` nodes from lark's parse tree."""

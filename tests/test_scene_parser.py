@@ -405,7 +405,8 @@ def test_bsdf_parameters_resolved(tmp_path: Path) -> None:
                  '<bsdf type="plastic" id="p"/><bsdf type="thindielectric" id="t"/>')
     ids = load(path).ids
     rc = ids["rc"]
-    assert rc["alpha_u"] == rc["alpha_v"] == 0.2 and rc["distribution"] == "ggx"
+    assert rc["alpha"] == 0.2 and rc["alpha_u"] is rc["alpha_v"] is None  # isotropic
+    assert rc["distribution"] == "ggx"
     assert rc["eta"].wavelengths is not None and rc["k"].rgb[0] > 3
     an = ids["an"]
     assert (an["alpha_u"], an["alpha_v"]) == (0.1, 0.3) and an["k"].rgb == (1.0, 1.0, 1.0)

@@ -2,10 +2,12 @@
 ``param``s of the stdlib plugins, and the combinators (``twosided``, ``blendbsdf``, ``mask``).
 
 The loader has resolved every Mitsuba parameter (defaults filled in, ``material`` turned into
-``eta``/``k``, ``alpha`` copied to ``alpha_u``/``alpha_v``, ``eta = int_ior / ext_ior``).
-Each one is passed to the rdsl plugin's parameter of the same name, after these conversions:
-``distribution`` "ggx"/"beckmann" to 0/1, ``alpha_u``/``alpha_v`` to ``alpha``/``alpha_v``
-(or to ``alpha`` alone where the plugin is isotropic and they agree), colors to RGB tuples and
+``eta``/``k``, ``eta = int_ior / ext_ior``; ``alpha_u``/``alpha_v`` set only where the XML
+gave them).  Each one is passed to the rdsl plugin's parameter of the same name, after these
+conversions: ``distribution`` "ggx"/"beckmann" to 0/1, the XML's ``alpha_u``/``alpha_v`` to
+``alpha``/``alpha_v`` (or to ``alpha`` alone where the plugin is isotropic and they agree;
+an isotropic ``alpha`` sets ``alpha`` alone, and the plugin's ``alpha_v`` follows it), colors
+to RGB tuples and
 textures to references (on a ``Float`` parameter, such as a roughness, to the texture's
 one-value lookup, Mitsuba's ``eval_1``; the scene schema says which parameters may be
 textures).  A parameter the rdsl plugin does not have is an error unless it
@@ -161,7 +163,10 @@ def leaf_instance(plugin: Any, textures: Any = None) -> Instance:
         p.pop("eta", None)   # derived: int_ior / ext_ior
     if p.get("distribution") is not None:
         p["distribution"] = DISTRIBUTIONS[p["distribution"]]
-    if "alpha_u" in p:
+    if p.get("alpha_u") is None:  # isotropic: `alpha` (the plugin's alpha_v follows it)
+        p.pop("alpha_u", None)
+        p.pop("alpha_v", None)
+    else:
         au, av = p.pop("alpha_u"), p.pop("alpha_v")
         if "alpha_v" in ours:
             p["alpha"], p["alpha_v"] = au, av

@@ -59,8 +59,14 @@ def param_slots(spec: SceneSpec) -> dict[str, Slot]:
         for inst in getattr(spec, kind):
             for key, value in inst.params.items():
                 if isinstance(value, Slot):
-                    out[f"{inst.name or inst.plugin}.{key}"] = value
+                    out[f"{inst.name or inst.plugin}.{mitsuba_key(key, inst.params)}"] = value
     return out
+
+
+def mitsuba_key(key: str, params: dict[str, Any]) -> str:
+    """Mitsuba's name of a plugin parameter: an anisotropic roughness's ``alpha`` (the XML's
+    ``alpha_u``) is ``alpha_u``."""
+    return "alpha_u" if key == "alpha" and "alpha_v" in params else key
 
 
 @dataclass(frozen=True)
@@ -163,6 +169,7 @@ def _check_tables(scene: Scene, name: str) -> None:
 
     key, _ = _lookup(scene.params.slots, name)
     owner, param = key.rsplit(".", 1)
+    param = "alpha" if param == "alpha_u" else param  # mitsuba_key's name
     mod = scene.compile()
     entries = (mod.manifest or {}).get("tables") or []
     if not entries:

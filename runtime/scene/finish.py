@@ -87,8 +87,9 @@ class Finishers:
             if has_u and "alpha" in node.props:
                 raise scene_error(f"{self.what(node)}: give either 'alpha' or "
                                   "'alpha_u'/'alpha_v', not both", _loc(node, "alpha"))
-            if not has_u:
-                p["alpha_u"] = p["alpha_v"] = p["alpha"]
+            # isotropic (`alpha`): alpha_u/alpha_v stay unset, so that the plugin's own
+            # isotropic case reads `alpha` for both axes and `<id>.alpha` is one parameter,
+            # as in Mitsuba's mi.traverse (`alpha_u`/`alpha_v` only when both are given)
         if "int_ior" in p:
             p["eta"] = p["int_ior"] / p["ext_ior"] if p["ext_ior"] > 0 else 0.0
         for side in ("int", "ext"):

@@ -33,11 +33,13 @@ class Lift(Pass):
 
     name = "lift"
 
-    def __init__(self, model: ColorModel = RGB) -> None:
+    def __init__(self, model: ColorModel = RGB, differentiated: bool = False) -> None:
         self.model = model
+        # `if const differentiated`: true in a build with derivatives
+        self.build_traits = frozenset({"differentiated"} if differentiated else ())
         # per function, set by run
         self.traits: set[Value] = set()
-        self.fn_traits: frozenset[str] = self.model.traits
+        self.fn_traits: frozenset[str] = self.model.traits | self.build_traits
         self.spectral: Spectral | None = None
         self.mueller: Mueller | None = None
 
@@ -69,7 +71,8 @@ class Lift(Pass):
             # `if const wavelengths`: this kernel has wavelengths (a plugin compiled on its own
             # has none, so code that needs them can fall back)
             sets = self.model.n == 4 and any(i.op is Op.SPEC_SET for i in fn.walk())
-            self.fn_traits = self.model.traits | ({"wavelengths"} if sets else set())
+            self.fn_traits = self.model.traits | self.build_traits | (
+                {"wavelengths"} if sets else set())
             self._fold_traits(fn.body, mapping)
             replace_uses(fn.body, mapping)
             self.spectral = Spectral(self.model, fn.loc) if self.model.n == 4 else None
