@@ -15,6 +15,7 @@ import pytest
 
 import rdsl
 from rdsl.compiler.diagnostics import CompileError
+from rdsl.compiler.passes.ad_checkpoint import TAPE_LANES
 
 from _scenes import CBOX
 
@@ -77,8 +78,12 @@ def test_checkpoint_tape_gives_the_recomputed_gradients_bit_for_bit():
         k = rdsl.jit(LOOP, build=dataclasses.replace(build, tape=cap)).k
         tape = [p.get("tape_floats") for p in k.info["params"] if p["name"] == "ad_tape"]
         assert len(tape) == (cap > 0) and all(t % (cap + 1) == 0 for t in tape)
-        extra = [np.zeros(x.size * tape[0], np.float32),
-                 np.arange(x.size, dtype=np.int32) * tape[0]] if tape else []
+        # each sample a row of its own, interleaved by blocks of TAPE_LANES
+        # (compiler/passes/ad_checkpoint.py)
+        i = np.arange(x.size, dtype=np.int32)
+        blocks = -(-x.size // TAPE_LANES)
+        extra = [np.zeros(blocks * TAPE_LANES * tape[0], np.float32),
+                 (i // TAPE_LANES) * TAPE_LANES * tape[0] + i % TAPE_LANES] if tape else []
         grad = np.zeros(x.size * NPRM, np.float32)
         value, gx = k(x, prm, a, grad, rows, *extra)
         out[cap] = (value, gx, grad)

@@ -440,13 +440,7 @@ def _gather_or_load(lw: Lowering, base: L.Value, idx: L.Value, ptrs: L.Value, m:
     batch of samples) take the load; other indices pay a compare and a branch, so indices
     read from memory (a triangle's vertices) skip the check."""
     b = lw.b
-    W = vty.count
-    ity = L.VectorType(I32, W)
-    first = b.extract_element(idx, const(I32, 0))
-    iota = L.Constant(ity, [L.Constant(I32, k) for k in range(W)])
-    step = b.icmp_signed("==", idx, b.add(lw.m.splat(b, first, W), iota))
-    bits = b.bitcast(step, L.IntType(W))
-    contiguous = b.icmp_signed("==", bits, L.Constant(L.IntType(W), -1))
+    first, contiguous = _consecutive(lw, idx, vty.count)
     load_bb = b.append_basic_block("contiguous")
     gather_bb = b.append_basic_block("gather")
     join_bb = b.append_basic_block("gathered")
@@ -467,6 +461,16 @@ def _gather_or_load(lw: Lowering, base: L.Value, idx: L.Value, ptrs: L.Value, m:
     return r
 
 
+def _consecutive(lw: Lowering, idx: L.Value, W: int) -> tuple[L.Value, L.Value]:
+    """Lane 0's index and whether ``idx[k] == idx[0] + k`` for every lane k (i32 indices)."""
+    b = lw.b
+    first = b.extract_element(idx, const(I32, 0))
+    iota = L.Constant(L.VectorType(I32, W), [L.Constant(I32, k) for k in range(W)])
+    step = b.icmp_signed("==", idx, b.add(lw.m.splat(b, first, W), iota))
+    bits = b.bitcast(step, L.IntType(W))
+    return first, b.icmp_signed("==", bits, L.Constant(L.IntType(W), -1))
+
+
 def _lower_scatter(lw: Lowering, ins: ir.Instr) -> None:
     buf, idx, val, mask = ins.operands
     e = _buf_elem(buf)
@@ -478,8 +482,21 @@ def _lower_scatter(lw: Lowering, ins: ir.Instr) -> None:
         with lw.b.if_then(m):
             lw.b.store(v, p, align=ALIGN[e.name])
         return
-    lw.call(f"llvm.masked.scatter.{mangle(v.type)}.{mangle(p.type)}", L.VoidType(),
-            v, p, const(I32, ALIGN[e.name]), m)
+    scatter = f"llvm.masked.scatter.{mangle(v.type)}.{mangle(p.type)}"
+    if idx.type.name != "i32" or lw.from_memory(idx):
+        lw.call(scatter, L.VoidType(), v, p, const(I32, ALIGN[e.name]), m)
+        return
+    # as _gather_or_load: a masked vector store where the indices turn out consecutive (the
+    # adjoint's per-lane tape rows, interleaved: passes/ad_checkpoint.py)
+    b = lw.b
+    first, contiguous = _consecutive(lw, lw.v(idx), m.type.count)
+    with b.if_else(contiguous) as (store, other):
+        with store:
+            p0 = b.gep(lw.v(buf), [b.sext(first, I64)], source_etype=mty)
+            lw.call(f"llvm.masked.store.{mangle(v.type)}.p0", L.VoidType(), v, p0,
+                    const(I32, ALIGN[e.name]), m)
+        with other:
+            lw.call(scatter, L.VoidType(), v, p, const(I32, ALIGN[e.name]), m)
 
 
 def _lower_if(lw: Lowering, ins: ir.Instr) -> list[L.Value]:

@@ -7,7 +7,13 @@ iteration n, its carried state (u64 as two Floats, Bools as 0 or 1, the rest bit
 in slot min(n, C) of its part of the lane's row of ``ad_tape`` (slot C takes the
 iterations beyond and is never read).  The row starts at ``ad_row_tape``; the kernel gets
 the two as arguments after the others (a uniform Float buffer, a varying Int) and the
-manifest's ``tape_floats`` is the row's length.  A loop inside another loop is not taped
+manifest's ``tape_floats`` is the row's length.  A row is interleaved with those of the
+other lanes of its packet: its value j is at ``ad_row_tape + j * TAPE_LANES``, so that a
+caller that gives the lanes of a packet consecutive rows (lane k of a block of
+``TAPE_LANES`` samples: ``block * TAPE_LANES * tape_floats + k``, as
+runtime/render/backward.py does) has each value of a packet stored and loaded as one
+vector, not scattered and gathered (the LLVM backend checks that the indices are
+consecutive at run time).  A loop inside another loop is not taped
 (each outer iteration would overwrite its slots): its adjoint recomputes from the start.
 
 The values the adjoint's sweep of an iteration reads from its run of the body forward (its
@@ -24,6 +30,7 @@ from ..ir import BOOL, F32, I32, U32, U64, Block, BufferType, Builder, Function,
     Param, Value, type_to_json
 
 TAPE, TAPE_ROW = "ad_tape", "ad_row_tape"
+TAPE_LANES = 16  # rows interleaved per block of this many lanes (the widest SIMD packet)
 _TYPES = (F32, I32, U32, BOOL, U64)
 
 
@@ -123,10 +130,12 @@ class Checkpoints:
     def _slot(self, slot: Value, size: int, offset: int, b: Builder,
               count: int | None = None) -> list[Value]:
         """The tape indices of the first ``count`` (all ``size``) values of slot ``slot``
-        of a loop's part."""
-        base = b.op(Op.ADD, I32, self.row, b.op(Op.ADD, I32, b.op(
-            Op.MUL, I32, slot, b.const(size, I32)), b.const(offset, I32)))
-        return [base, *[b.op(Op.ADD, I32, base, b.const(j, I32))
+        of a loop's part (value j of the lane's row at ``row + j * TAPE_LANES``)."""
+        lanes = b.const(TAPE_LANES, I32)
+        first = b.op(Op.ADD, I32, b.op(Op.MUL, I32, slot, b.const(size, I32)),
+                     b.const(offset, I32))
+        base = b.op(Op.ADD, I32, self.row, b.op(Op.MUL, I32, first, lanes))
+        return [base, *[b.op(Op.ADD, I32, base, b.const(j * TAPE_LANES, I32))
                         for j in range(1, size if count is None else count)]]
 
 

@@ -30,6 +30,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from ...compiler.build import elimination_threshold
+from ...compiler.passes.ad_checkpoint import TAPE_LANES
 from ...compiler.diagnostics import CompileError
 from ...core.scene_spec import Slot
 from ..scene.samplers import sample_count
@@ -67,8 +68,8 @@ def _check(scene: Scene, d_img: Any, params: list[str]) -> tuple[np.ndarray, dic
     return d.reshape(shape), chosen
 
 
-LANES = 16  # the widest SIMD packet: lanes of one packet add gradients into rows of their
-# own (array position mod LANES), each part of the adjoint pass into LANES rows (_Parts)
+LANES = TAPE_LANES  # the widest SIMD packet: lanes of one packet add gradients into rows of
+# their own (array position mod LANES), each part of the adjoint pass into LANES rows (_Parts)
 PARTS_PER_THREAD = 4
 TAPE = 16  # bounces whose carried state the adjoint kernel checkpoints per lane (the
 # rest it recomputes from the last checkpoint: compiler/passes/ad_reverse.py)
@@ -131,7 +132,7 @@ def backward(scene: Scene, d_img: Any, params: list[str], spp: int | None = None
     for done in range(0, spp, batch):
         n = cells * min(batch, spp - done)
         varying = {"j": j[:n], "ad_row": parts.rows(n, prm.size), "ad_row_tape":
-                   parts.rows(n, floats), "ad_row_T": parts.rows(n, scene.buffers.T.size)
+                   parts.tape_rows(n, floats), "ad_row_T": parts.rows(n, scene.buffers.T.size)
                    if parts.texels else np.zeros(n, np.int32)}
         uniform["BATCH"] = np.array([done, spp, seed_bits], np.int32)
         args = [(varying[x], True) if x in varying else (uniform[x], False)
@@ -184,6 +185,15 @@ class _Parts:
         rows = np.empty(n, np.int32)
         for p, (lo, hi) in enumerate(self._bounds(n)):
             rows[lo:hi] = (p * LANES + np.arange(hi - lo) % LANES) * size
+        return rows
+
+    def tape_rows(self, n: int, floats: int) -> np.ndarray:
+        """Each sample's row of the tape, interleaved with the other lanes of its packet
+        (compiler/passes/ad_checkpoint.py: lane k of a part's block at ``k``, its value j
+        ``TAPE_LANES`` further on each time)."""
+        rows = np.empty(n, np.int32)
+        for p, (lo, hi) in enumerate(self._bounds(n)):
+            rows[lo:hi] = p * LANES * floats + np.arange(hi - lo) % LANES
         return rows
 
     def run(self, call, n: int) -> None:
