@@ -4,8 +4,8 @@ Each object is checked against :mod:`.schema`: an unknown plugin, an unknown par
 value of the wrong kind or a missing required parameter is a :class:`SceneError` naming the
 file, the line, the plugin and what it accepts.  Parameters not given take Mitsuba 3's
 defaults, and derived values are resolved here (conductor ``material`` to ``eta``/``k``,
-``alpha_u``/``alpha_v`` checked (both or neither, not with ``alpha``), the camera's field of view to ``fov_x``, the film's
-crop window).  Shapes carry their triangle mesh in world space.  Nothing is half-loaded: the
+the camera's field of view to ``fov_x``, the film's crop window; ``alpha_u``/``alpha_v``
+are checked: both or neither, and not with ``alpha``).  Shapes carry their triangle mesh in world space.  Nothing is half-loaded: the
 first error stops the load.
 
 A ``bsdf``, ``texture`` or ``emitter`` type is resolved through the scene's plugin registry
