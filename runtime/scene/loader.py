@@ -5,8 +5,8 @@ value of the wrong kind or a missing required parameter is a :class:`SceneError`
 file, the line, the plugin and what it accepts.  Parameters not given take Mitsuba 3's
 defaults, and derived values are resolved here (conductor ``material`` to ``eta``/``k``,
 the camera's field of view to ``fov_x``, the film's crop window; ``alpha_u``/``alpha_v``
-are checked: both or neither, and not with ``alpha``).  Shapes carry their triangle mesh in world space.  Nothing is half-loaded: the
-first error stops the load.
+are checked: both or neither, and not with ``alpha``).  Shapes carry their triangle mesh
+in world space.  Nothing is half-loaded: the first error stops the load.
 
 A ``bsdf``, ``texture`` or ``emitter`` type is resolved through the scene's plugin registry
 (runtime/plugins.py): a user plugin is checked against its own ``param`` declarations
