@@ -31,6 +31,7 @@ per tree) is not folded into the coefficients: it becomes the mixture's ``w0``/`
 
 from __future__ import annotations
 
+import dataclasses
 import re
 from collections.abc import Iterator
 from dataclasses import dataclass
@@ -188,19 +189,23 @@ def leaf_instance(plugin: Any, textures: Any = None) -> Instance:
     return Instance(plugin.type, params, plugin.id or plugin.type)
 
 
-def perturbed_instance(plugin: Any, textures: Any, twosided: bool = False) -> Instance:
+def perturbed_instance(plugin: Any, textures: Any, twosided: bool = False,
+                       prefix: str | None = None) -> Instance:
     """A ``normalmap`` or ``bumpmap`` (in a ``twosided``: the frame is mirrored for light from
     below): the internal plugin ``perturbed`` (stdlib/bsdf/perturbed.rdsl), the nested BSDF's
-    mixture parameters and leaves plus the texture that perturbs the shading normal."""
+    mixture parameters and leaves plus the texture that perturbs the shading normal
+    (``prefix``: the leaves' names start with it, see :func:`bsdf_instance`)."""
     nested = plugin.children[0]
     if twosided and nested.type in TRANSMISSIVE:
         raise CompileError(f"{_where(nested)}: only BSDFs without transmission can be nested "
                            f"in twosided, not `{nested.type}` (as Mitsuba)", nested.loc)
+    inner_name = f"{prefix or plugin.id or plugin.type}.nested_bsdf"  # Mitsuba's key
     if nested.type in COMBINATORS:
-        inner = bsdf_instance(nested, textures)
+        inner = bsdf_instance(nested, textures, inner_name)
         params, leaves = dict(inner.params), inner.children
     else:
-        params, leaves = mixture_params([(0, 1.0, 1.0, False)]), [leaf_instance(nested, textures)]
+        params = mixture_params([(0, 1.0, 1.0, False)])
+        leaves = [dataclasses.replace(leaf_instance(nested, textures), name=inner_name)]
     bump = plugin.type == "bumpmap"
     name = ANY_TEXTURE if bump else "normalmap"
     tex = plugin.params.get(name)
@@ -219,14 +224,19 @@ def perturbed_instance(plugin: Any, textures: Any, twosided: bool = False) -> In
     return Instance("perturbed", params, plugin.id or plugin.type, leaves)
 
 
-def bsdf_instance(plugin: Any, textures: Any = None) -> Instance:
+def bsdf_instance(plugin: Any, textures: Any = None, prefix: str | None = None) -> Instance:
     """The instance of a shape's BSDF; a combinator's nested BSDFs are its ``children``
-    (``split_leaves`` numbers them)."""
+    (``split_leaves`` numbers them), named as Mitsuba's ``mi.traverse`` names them: the
+    outermost BSDF's id (or ``prefix``) and the path of keys down to them (``brdf_0``,
+    ``brdf_1`` in a twosided, ``bsdf_0``, ``bsdf_1`` in a blendbsdf, ``nested_bsdf`` in a
+    mask, a normalmap and a bumpmap), whatever ids they have themselves."""
+    top = prefix or plugin.id or plugin.type
     if plugin.type in PERTURBED:
-        return perturbed_instance(plugin, textures)
+        return perturbed_instance(plugin, textures, prefix=top)
     if (plugin.type == "twosided" and len(plugin.children) == 1
             and plugin.children[0].type in PERTURBED):
-        return perturbed_instance(plugin.children[0], textures, twosided=True)
+        return perturbed_instance(plugin.children[0], textures, twosided=True,
+                                  prefix=f"{top}.brdf_0")
     if plugin.type not in COMBINATORS:
         return leaf_instance(plugin, textures)
     tree = _Tree(textures)
@@ -251,8 +261,9 @@ def bsdf_instance(plugin: Any, textures: Any = None) -> Instance:
     params["factors"] = sum(mode << (4 * i + 2 * j) for i, fs in enumerate(factors)
                             for j, mode in fs)
     params["w0"], params["w1"] = (tree.weights + [1.0, 1.0])[:TEXTURED_WEIGHTS]
-    return Instance("mixture", params, plugin.id or plugin.type,
-                    [leaf_instance(t.leaf, textures) for t in terms])
+    leaves = [dataclasses.replace(leaf_instance(t.leaf, textures),
+                                  name=".".join((top, *t.path))) for t in terms]
+    return Instance("mixture", params, plugin.id or plugin.type, leaves)
 
 
 def mixture_params(terms: list[tuple[int, float, float, bool]], null_above: float = 0.0,
@@ -283,6 +294,7 @@ class _Term:
     below: float
     factors: tuple[tuple[int, int], ...]
     mirror: bool
+    path: tuple[str, ...] = ()  # Mitsuba's keys from the tree's root (bsdf_instance)
 
 
 class _Tree:
@@ -312,7 +324,8 @@ class _Tree:
         return 1.0, 1.0, len(self.weights) - 1
 
     def flatten(self, plugin: Any, above: float, below: float,
-                factors: tuple[tuple[int, int], ...], mirror: bool, in_twosided: bool) -> None:
+                factors: tuple[tuple[int, int], ...], mirror: bool, in_twosided: bool,
+                path: tuple[str, ...] = ()) -> None:
         """Add the terms of ``plugin``'s subtree, reached with coefficients ``above`` and
         ``below`` and textured ``factors``; ``mirror``: the path from below has passed a
         twosided, which turned the directions over (after that the subtree is seen from its
@@ -327,7 +340,7 @@ class _Tree:
                 raise CompileError(f"{_where(plugin)}: only BSDFs without transmission can be "
                                    f"nested in twosided, not `{plugin.type}` (as Mitsuba)",
                                    plugin.loc)
-            self.terms.append(_Term(plugin, above, below, factors, mirror))
+            self.terms.append(_Term(plugin, above, below, factors, mirror, path))
             return
         kids = plugin.children
         if plugin.type in ("blendbsdf", "mask"):
@@ -336,18 +349,21 @@ class _Tree:
             on = factors + ((slot, 1),) if slot is not None else factors
             off = factors + ((slot, 2),) if slot is not None else factors
             if plugin.type == "blendbsdf":
-                self.flatten(kids[0], above * rest, below * rest, off, mirror, in_twosided)
-                self.flatten(kids[1], above * w, below * w, on, mirror, in_twosided)
+                self.flatten(kids[0], above * rest, below * rest, off, mirror, in_twosided,
+                             (*path, "bsdf_0"))
+                self.flatten(kids[1], above * w, below * w, on, mirror, in_twosided,
+                             (*path, "bsdf_1"))
             else:
                 self.null.append(_Term(None, above * rest, below * rest, off, mirror))
-                self.flatten(kids[0], above * w, below * w, on, mirror, in_twosided)
+                self.flatten(kids[0], above * w, below * w, on, mirror, in_twosided,
+                             (*path, "nested_bsdf"))
         elif len(kids) == 1 or mirror:
             # twosided(x): from below, x sees mirrored directions; a twosided(x, y) already
             # turned to its front side sees x only
-            self.flatten(kids[0], above, below, factors, True, True)
+            self.flatten(kids[0], above, below, factors, True, True, (*path, "brdf_0"))
         else:  # twosided(x, y): x from above, y from below (mirrored)
-            self.flatten(kids[0], above, 0.0, factors, True, True)
-            self.flatten(kids[1], 0.0, below, factors, True, True)
+            self.flatten(kids[0], above, 0.0, factors, True, True, (*path, "brdf_0"))
+            self.flatten(kids[1], 0.0, below, factors, True, True, (*path, "brdf_1"))
 
 
 def _first_leaf(plugin: Any) -> Any:

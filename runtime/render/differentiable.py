@@ -42,6 +42,7 @@ from ...compiler.ir import ScalarType
 from ...compiler.passes.specialize import parameter_slots
 from ...core.color import ColorModel
 from ...core.scene_spec import Instance, SceneSpec, Slot
+from ..plugins import INTERNAL
 
 if TYPE_CHECKING:
     from .renderer import Scene
@@ -57,6 +58,8 @@ def param_slots(spec: SceneSpec) -> dict[str, Slot]:
     out: dict[str, Slot] = {}
     for kind in KINDS:
         for inst in getattr(spec, kind):
+            if inst.plugin in INTERNAL:  # a combinator tree's own numbers (its leaves are
+                continue  # named by their path: runtime/render/bsdfs.py)
             for key, value in inst.params.items():
                 if isinstance(value, Slot):
                     out[f"{inst.name or inst.plugin}.{mitsuba_key(key, inst.params)}"] = value
