@@ -16,8 +16,9 @@ along ``tangent`` in the parameter's space (all ones by default: the derivative 
 respect to a grey change of a colour).  It renders with a build whose kernel also carries
 the tangents of every value (``ad_forward``, compiler/passes/ad_forward.py): the tangent
 buffer ``dPRM`` holds ``tangent`` in the parameter's slots and zeros elsewhere, and the film
-accumulates ``derivative(value)`` as extra channels.  The derivative is that of the same
-Monte Carlo estimate (same seed): it ignores the discontinuities of visibility, as
+accumulates ``derivative(value)`` as extra channels.  The derivative is that of Mitsuba 3's
+``prb`` estimator (docs/ad.md, "The estimator"): for a colour, the derivative of the same
+Monte Carlo estimate (same seed); it ignores the discontinuities of visibility, as
 Mitsuba 3 does without reparameterization.
 
 Colours are stored as RGB in the ``mono`` and ``rgb`` variants.  The spectral variants store
