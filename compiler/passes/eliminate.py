@@ -91,7 +91,8 @@ class Eliminate(Pass):
         trial = dataclasses.replace(fn, body=clone_block(fn.body, {}))
         for blk, m in sweep_blocks(trial):
             _Sweep(trial, blk, m, self.threshold).run()
-        before, after = _tape_values(fn), _tape_values(trial)
+        before = [t.values for t in tape(dataclasses.replace(fn, body=clone_block(fn.body, {})))]
+        after = [t.values for t in tape(trial)]  # its DCE only drops what the sweeps left
         if all(a <= b for a, b in zip(after, before)):
             fn.body = trial.body
 
@@ -381,12 +382,6 @@ class _Sweep:
                 v = zero_guard(b, x, v)  # a zero partial upstream: 0 even through an infinite one
         memo[w] = v
         return v
-
-
-def _tape_values(fn: Function) -> list[int]:
-    """The forward values each sweep of ``fn`` reads (measured on a copy: ``tape`` runs
-    DCE)."""
-    return [t.values for t in tape(dataclasses.replace(fn, body=clone_block(fn.body, {})))]
 
 
 def _mul(a: W, b: W) -> W:

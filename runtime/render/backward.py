@@ -30,8 +30,8 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from ...compiler.build import elimination_threshold
-from ...compiler.passes.ad_checkpoint import TAPE_LANES
 from ...compiler.diagnostics import CompileError
+from ...compiler.passes.ad_checkpoint import TAPE_LANES
 from ...core.scene_spec import Slot
 from ..scene.samplers import sample_count
 from .differentiable import Texels, _lookup, ad_twin, adjoint_seeds
@@ -131,8 +131,9 @@ def backward(scene: Scene, d_img: Any, params: list[str], spp: int | None = None
     ones = np.ones(j.size, np.float32)  # every seed: d (sum of the kernel's result) = 1
     for done in range(0, spp, batch):
         n = cells * min(batch, spp - done)
-        varying = {"j": j[:n], "ad_row": parts.rows(n, prm.size), "ad_row_tape":
-                   parts.tape_rows(n, floats), "ad_row_T": parts.rows(n, scene.buffers.T.size)
+        varying = {"j": j[:n], "ad_row": parts.rows(n, prm.size),
+                   "ad_row_tape": parts.rows(n, floats, interleaved=True),
+                   "ad_row_T": parts.rows(n, scene.buffers.T.size)
                    if parts.texels else np.zeros(n, np.int32)}
         uniform["BATCH"] = np.array([done, spp, seed_bits], np.int32)
         args = [(varying[x], True) if x in varying else (uniform[x], False)
@@ -180,20 +181,14 @@ class _Parts:
         step = -(-per // LANES) * LANES
         return [(lo, min(lo + step, n)) for lo in range(0, n, step)]
 
-    def rows(self, n: int, size: int) -> np.ndarray:
-        """The first element of each sample's row, in a buffer of rows of ``size``."""
+    def rows(self, n: int, size: int, interleaved: bool = False) -> np.ndarray:
+        """The first element of each sample's row, in a buffer of rows of ``size``; with
+        ``interleaved`` (the tape's: compiler/passes/ad_checkpoint.py) lane k of a part's
+        block starts at ``k`` and its value j is ``TAPE_LANES`` further on each time."""
         rows = np.empty(n, np.int32)
         for p, (lo, hi) in enumerate(self._bounds(n)):
-            rows[lo:hi] = (p * LANES + np.arange(hi - lo) % LANES) * size
-        return rows
-
-    def tape_rows(self, n: int, floats: int) -> np.ndarray:
-        """Each sample's row of the tape, interleaved with the other lanes of its packet
-        (compiler/passes/ad_checkpoint.py: lane k of a part's block at ``k``, its value j
-        ``TAPE_LANES`` further on each time)."""
-        rows = np.empty(n, np.int32)
-        for p, (lo, hi) in enumerate(self._bounds(n)):
-            rows[lo:hi] = p * LANES * floats + np.arange(hi - lo) % LANES
+            lane = np.arange(hi - lo) % LANES
+            rows[lo:hi] = p * LANES * size + (lane if interleaved else lane * size)
         return rows
 
     def run(self, call, n: int) -> None:

@@ -31,10 +31,9 @@ per tree) is not folded into the coefficients: it becomes the mixture's ``w0``/`
 
 from __future__ import annotations
 
-import dataclasses
 import re
 from collections.abc import Iterator
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from functools import cache
 from typing import Any
 
@@ -205,7 +204,7 @@ def perturbed_instance(plugin: Any, textures: Any, twosided: bool = False,
         params, leaves = dict(inner.params), inner.children
     else:
         params = mixture_params([(0, 1.0, 1.0, False)])
-        leaves = [dataclasses.replace(leaf_instance(nested, textures), name=inner_name)]
+        leaves = [replace(leaf_instance(nested, textures), name=inner_name)]
     bump = plugin.type == "bumpmap"
     name = ANY_TEXTURE if bump else "normalmap"
     tex = plugin.params.get(name)
@@ -261,7 +260,7 @@ def bsdf_instance(plugin: Any, textures: Any = None, prefix: str | None = None) 
     params["factors"] = sum(mode << (4 * i + 2 * j) for i, fs in enumerate(factors)
                             for j, mode in fs)
     params["w0"], params["w1"] = (tree.weights + [1.0, 1.0])[:TEXTURED_WEIGHTS]
-    leaves = [dataclasses.replace(leaf_instance(t.leaf, textures),
+    leaves = [replace(leaf_instance(t.leaf, textures),
                                   name=".".join((top, *t.path))) for t in terms]
     return Instance("mixture", params, plugin.id or plugin.type, leaves)
 
