@@ -209,7 +209,8 @@ def ad_twin(scene: Scene, ad: str, eliminate: int = 0, tape: int = 0,
         twin.__dict__.update(scene.__dict__)
         twin.build = Build(scene.build.target, scene.build.model, ad, eliminate, tape, seeds)
         twin.specialize, twin.derivative, twin._prm_set = False, ad == "forward", True
-        twin._module = None
+        twin._tier_up = None  # the scene's own background build, not the twin's
+        twin._reset_kernels()
         twin._forward = twin._reverse = None
         setattr(scene, attr, twin)
     return twin

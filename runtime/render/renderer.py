@@ -155,7 +155,7 @@ class Scene:
             self.embree = EmbreeScene(self.buffers.meshes, quality="low", mesh_quality="high")
         self.prm = np.zeros(1, np.float32)  # PRM of the generic build
         self._prm_set = False  # a value of PRM was assigned (scene.params[...] = ...)
-        self._module = None
+        self._reset_kernels()
         self.report: list[str] = []
         self.compile_seconds = 0.0
         self.from_cache = False
@@ -172,22 +172,59 @@ class Scene:
         loaded_quick = getattr(self._module, "quick", False)  # a PTX module has no tiers
         if self._module is not None and not again and (quick or not loaded_quick):
             return self._module
-        src, scene, filename = self._kernel_inputs()
-        kw = {"build": self.build, "scene": scene, "search_paths": self.search_paths,
-              "filename": filename}
-        if self.build.ad == "reverse":  # backward runs this kernel's adjoint, and no other
-            kw["exports"] = ["render_sample_loss"]
+        src, kw = self._jit_args()
         try:
             mod = jit(src, quick=quick and not jit_cached(src, **kw), **kw)
         except NoRayTracer:  # one line: what is missing, not the integrator's source
             raise CompileError(_no_ray_tracer(self.path, self.build.target.name)) from None
         if not self.specialize:  # and so do the tables the plugins compute per scene
-            self.prm = fill_tables(mod, self.scene_spec, self.prm, src, filename,
+            self.prm = fill_tables(mod, self.scene_spec, self.prm, src, kw["filename"],
                                    self.search_paths)
         self._module = mod
         self.compile_seconds = mod.compile_seconds
         self.from_cache = mod.from_cache
         return mod
+
+    def _jit_args(self) -> tuple[str, dict[str, Any]]:
+        """What :func:`rdsl.runtime.api.jit` builds the render kernels from: the source
+        and its options (but the tier)."""
+        src, scene, filename = self._kernel_inputs()
+        kw = {"build": self.build, "scene": scene, "search_paths": self.search_paths,
+              "filename": filename}
+        if self.build.ad == "reverse":  # backward runs this kernel's adjoint, and no other
+            kw["exports"] = ["render_sample_loss"]
+        return src, kw
+
+    def _reset_kernels(self) -> None:
+        """Forget the loaded kernels (the next render compiles or loads new ones), and
+        stop a background build of the old ones' full tier."""
+        self._module = None
+        if getattr(self, "_tier_up", None) is not None:
+            self._tier_up.stop()
+        self._tier_up, self._quick_renders = None, 0
+
+    def _tiered(self, mod: Any) -> Any:
+        """The kernels a render runs: ``mod``, or the full tier once a background build
+        of it is done (runtime/render/tier_up.py); starts that build at the
+        ``RENDERS_BEFORE_TIER_UP``-th render with quick-tier kernels."""
+        from ...runtime.api import quick_everywhere
+        from .tier_up import RENDERS_BEFORE_TIER_UP, TierUp
+
+        if not getattr(mod, "quick", False) or quick_everywhere():
+            return mod
+        if self._tier_up is None:
+            self._quick_renders += 1
+            if self._quick_renders >= RENDERS_BEFORE_TIER_UP:
+                self._tier_up = TierUp(*self._jit_args())
+            return mod
+        if not self._tier_up.done():
+            return mod
+        full = self._tier_up.load()
+        self._tier_up, self._quick_renders = None, -(1 << 30)  # built once, or failed
+        if full is None:
+            return mod
+        self._module = full
+        return full
 
     def _kernel_inputs(self) -> tuple[str, SceneSpec, str]:
         """The render kernel's source, what specialize is told about the scene, and the
@@ -246,7 +283,7 @@ class Scene:
             self._prm_set = True
         if self.specialize:
             self.specialize = False
-            self._module = None
+            self._reset_kernels()
 
     def render_forward(self, name: str, spp: int | None = None, seed: int | None = None,
                        tangent: Any = None, threads: int | None = None
@@ -346,7 +383,7 @@ class Scene:
         :class:`RenderCancelled` (rdsl render --watch drops a render an edit made stale)."""
         spp = sample_count(self.desc.sensor.sampler, int(spp or self.spp))
         seed = self.seed if seed is None else int(seed)
-        mod = self.compile(quick=self.quick_fits(spp))
+        mod = self._tiered(self.compile(quick=self.quick_fits(spp)))
         if mod.traces_rays:  # a path tracer with max_depth 0 traces none: its image is black
             if self.embree is None:
                 raise CompileError("the render kernel traces rays through Embree, but the "
