@@ -378,46 +378,51 @@ def _query_function(mod: Any, kind: str, query: str, test: Any) -> None:
             put("instPrimID", x.c(x.i32, -1), x.i32)
         b.branch(nxt)
 
-    def packet(x: _IR, args: Any) -> None:
-        b = x.b
-        user, prim = x.byte(args, x.ptr, 8), x.byte(args, x.i32, 16)
-        context, rays = x.byte(args, x.ptr, 24), x.byte(args, x.ptr, 32)
-        geom = x.byte(args, x.i32, 44)
-        active = b.icmp_signed("!=", b.load(x.byte(args, x.ptr, 0), typ=x.lanes(x.i32),
-                                            align=4), x.k(x.i32, 0))
-
-        def ray(name: str) -> Any:  # row `name`: the packet's lanes are consecutive
-            row = x.at(rays, x.f32, RAY_FIELDS.index(name) * x.width)
-            return b.fpext(b.load(row, typ=x.lanes(x.f32), align=4), x.lanes(x.f64))
-
-        o = [ray(f"org_{a}") for a in "xyz"]
-        d = [ray(f"dir_{a}") for a in "xyz"]
-        hit, t, ng, u, v = test(x, user, o, d, ray("tnear"), ray("tfar"))
-        found = b.and_(active, hit)
-
-        def put(row: int, value: Any) -> None:  # the lanes that found a hit
-            ty = value.type.element
-            b.call(_masked_store(b.module, value.type),
-                   [value, x.at(rays, ty, row * x.width), x.c(x.i32, 4), found])
-
-        tfar = RAY_FIELDS.index("tfar")
-        if query == "occluded":
-            put(tfar, x.k(x.f32, float("-inf")))
-        else:
-            put(tfar, b.fptrunc(t, x.lanes(x.f32)))
-            hits = len(RAY_FIELDS)
-            for a, comp in zip("xyz", ng):
-                put(hits + HIT_FIELDS.index(f"Ng_{a}"), b.fptrunc(comp, x.lanes(x.f32)))
-            put(hits + HIT_FIELDS.index("u"), b.fptrunc(u, x.lanes(x.f32)))
-            put(hits + HIT_FIELDS.index("v"), b.fptrunc(v, x.lanes(x.f32)))
-            put(hits + HIT_FIELDS.index("primID"), x.uniform(prim))
-            put(hits + HIT_FIELDS.index("geomID"), x.uniform(geom))
-            put(hits + HIT_FIELDS.index("instID"), x.uniform(x.load(context, x.i32, 0)))
-            put(hits + HIT_FIELDS.index("instPrimID"), x.k(x.i32, -1))
-        b.ret_void()
-
     # the SDF grid's test calls its (scalar) kernel once per ray: lane by lane
-    _lane_loop(fn, 40, lane, None if kind == "sdfgrid" else packet)
+    _lane_loop(fn, 40, lane, None if kind == "sdfgrid" else
+               lambda x, args: _packet_query(x, args, query, test))
+
+
+def _packet_query(x: _IR, args: Any, query: str, test: Any) -> None:
+    """The ``query`` (intersect or occluded) of all lanes of a packet at once: ``x``
+    computes on vectors of the packet's width, the rays' rows are vectors (the packet's
+    lanes are consecutive), and the lanes that hit store their results (masked)."""
+    b = x.b
+    user, prim = x.byte(args, x.ptr, 8), x.byte(args, x.i32, 16)
+    context, rays = x.byte(args, x.ptr, 24), x.byte(args, x.ptr, 32)
+    geom = x.byte(args, x.i32, 44)
+    active = b.icmp_signed("!=", b.load(x.byte(args, x.ptr, 0), typ=x.lanes(x.i32),
+                                        align=4), x.k(x.i32, 0))
+
+    def ray(name: str) -> Any:  # row `name`: the packet's lanes are consecutive
+        row = x.at(rays, x.f32, RAY_FIELDS.index(name) * x.width)
+        return b.fpext(b.load(row, typ=x.lanes(x.f32), align=4), x.lanes(x.f64))
+
+    o = [ray(f"org_{a}") for a in "xyz"]
+    d = [ray(f"dir_{a}") for a in "xyz"]
+    hit, t, ng, u, v = test(x, user, o, d, ray("tnear"), ray("tfar"))
+    found = b.and_(active, hit)
+
+    def put(row: int, value: Any) -> None:  # the lanes that found a hit
+        ty = value.type.element
+        b.call(_masked_store(b.module, value.type),
+               [value, x.at(rays, ty, row * x.width), x.c(x.i32, 4), found])
+
+    tfar = RAY_FIELDS.index("tfar")
+    if query == "occluded":
+        put(tfar, x.k(x.f32, float("-inf")))
+    else:
+        put(tfar, b.fptrunc(t, x.lanes(x.f32)))
+        hits = len(RAY_FIELDS)
+        for a, comp in zip("xyz", ng):
+            put(hits + HIT_FIELDS.index(f"Ng_{a}"), b.fptrunc(comp, x.lanes(x.f32)))
+        put(hits + HIT_FIELDS.index("u"), b.fptrunc(u, x.lanes(x.f32)))
+        put(hits + HIT_FIELDS.index("v"), b.fptrunc(v, x.lanes(x.f32)))
+        put(hits + HIT_FIELDS.index("primID"), x.uniform(prim))
+        put(hits + HIT_FIELDS.index("geomID"), x.uniform(geom))
+        put(hits + HIT_FIELDS.index("instID"), x.uniform(x.load(context, x.i32, 0)))
+        put(hits + HIT_FIELDS.index("instPrimID"), x.k(x.i32, -1))
+    b.ret_void()
 
 
 def _masked_store(mod: Any, vt: Any) -> Any:

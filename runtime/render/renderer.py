@@ -72,9 +72,10 @@ def _bvh_quality(bufs: SceneBuffers) -> str:
     over the shapes; scenes of a few large shapes, such as the Cornell box (36 triangles),
     trace about a third faster that way than through one BVH over all triangles.  "high":
     one BVH with spatial splits, which traces meshes of many triangles faster (AMD EPYC,
-    64 spp, medians of 6 renders: bigmesh 0.41-0.45 -> 0.35-0.36 s, matpreview_diffuse
-    0.26-0.28 -> 0.25-0.26 s, textures 0.24 -> 0.23 s; cbox 0.96-1.09 -> 1.31 s) and builds
-    in 0.07 s for 100k triangles."""
+    64 spp, bench/scene_set.py in two alternated runs of each build: bigmesh 0.367, 0.327 ->
+    0.320, 0.298 s, matpreview_diffuse 0.276, 0.277 -> 0.263, 0.254 s; the Cornell box went
+    from 0.96-1.09 s to 1.31 s, so it keeps two levels) and builds in 0.07 s for 100k
+    triangles."""
     triangles = sum(len(m[1]) for m in bufs.meshes if not hasattr(m, "new_geometry"))
     return "low" if triangles < TWO_LEVEL_TRIANGLES else "high"
 
@@ -227,14 +228,15 @@ class Scene:
         if not getattr(mod, "quick", False) or quick_everywhere():
             return mod
         if self._tier_up is None:
-            self._quick_renders += 1
-            if self._quick_renders >= RENDERS_BEFORE_TIER_UP:
-                self._tier_up = TierUp(*self._jit_args())
+            if self._quick_renders is not None:  # None: built already (or it failed)
+                self._quick_renders += 1
+                if self._quick_renders >= RENDERS_BEFORE_TIER_UP:
+                    self._tier_up = TierUp(*self._jit_args())
             return mod
         if not self._tier_up.done():
             return mod
         full = self._tier_up.load()
-        self._tier_up, self._quick_renders = None, -(1 << 30)  # built once, or failed
+        self._tier_up, self._quick_renders = None, None
         if full is None:
             return mod
         self._module = full

@@ -2,10 +2,11 @@
 built in the background, and switches to it when it is ready.
 
 A small render whose kernels are not in the cache compiles the quick tier (LLVM O0,
-``renderer.QUICK_SAMPLES``): the first image comes sooner, and its kernels run slower (up
-to ~1.7x on the Cornell box's render kernel).  A one-off render should not pay the full
-tier's compile as well; a loop of small renders (inverse rendering, ``--watch``, a preview
-that is refined) should not keep the slow kernels.  So the second render of a scene with
+``renderer.QUICK_SAMPLES``): the first image comes sooner, and its kernels run slower (15-30%
+in docs/bench.md's table; 0.12 s against 0.060 s per Cornell-box render at 128x128 and 16
+spp on an AMD EPYC host).  A one-off render should not pay the full tier's compile as
+well; a loop of small renders (inverse rendering, a preview that is refined) should not
+keep the slow kernels.  So the second render of a scene with
 quick kernels starts :class:`TierUp`: another Python process compiles the full tier into
 the kernel cache (a process, not a thread: the compiler's passes are Python and would hold
 the interpreter lock, and llvmlite's LLVM is not safe to drive from two threads), and a
