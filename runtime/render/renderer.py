@@ -231,7 +231,13 @@ class Scene:
             if self._quick_renders is not None:  # None: built already (or it failed)
                 self._quick_renders += 1
                 if self._quick_renders >= RENDERS_BEFORE_TIER_UP:
-                    self._tier_up = TierUp(*self._jit_args())
+                    try:
+                        self._tier_up = TierUp(*self._jit_args())
+                    except OSError as e:  # no process to spare: the quick tier goes on
+                        warnings.warn(f"cannot build the full-tier kernels in the "
+                                      f"background ({e}); rendering goes on with the quick "
+                                      "tier", stacklevel=3)
+                        self._quick_renders = None
             return mod
         if not self._tier_up.done():
             return mod
