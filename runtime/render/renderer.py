@@ -233,7 +233,8 @@ class Scene:
                 if self._quick_renders >= RENDERS_BEFORE_TIER_UP:
                     try:
                         self._tier_up = TierUp(*self._jit_args())
-                    except OSError as e:  # no process to spare: the quick tier goes on
+                    except Exception as e:  # noqa: BLE001 - no process to spare, or a
+                        # scene that cannot be pickled: an optimization, the render goes on
                         warnings.warn(f"cannot build the full-tier kernels in the "
                                       f"background ({e}); rendering goes on with the quick "
                                       "tier", stacklevel=3)

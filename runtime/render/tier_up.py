@@ -39,13 +39,14 @@ class TierUp:
 
     def __init__(self, source: str, options: dict[str, Any]) -> None:
         self.source, self.options = source, options
+        job = pickle.dumps((source, options))  # first: a scene that cannot be sent starts none
         # its messages go to a file: a pipe could fill up, or break when this process ends
         self.messages = tempfile.TemporaryFile()
         self.proc = subprocess.Popen(
             [sys.executable, "-m", __name__], stdin=subprocess.PIPE,
             stdout=subprocess.DEVNULL, stderr=self.messages)
         try:
-            self.proc.stdin.write(pickle.dumps((source, options)))
+            self.proc.stdin.write(job)
             self.proc.stdin.close()
         except OSError:  # the worker died at start: done() reports it
             pass
