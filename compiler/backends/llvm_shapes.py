@@ -169,11 +169,8 @@ class _IR:
                                      L.Constant(self.lanes(self.i32), [0] * self.width))
 
     def sqrt(self, value: Any) -> Any:
-        ty = value.type
         suffix = "f64" if self.width == 1 else f"v{self.width}f64"
-        name = f"llvm.sqrt.{suffix}"
-        fn = self.b.module.globals.get(name) or L.Function(
-            self.b.module, L.FunctionType(ty, [ty]), name)
+        fn = _intrinsic(self.b.module, f"llvm.sqrt.{suffix}", value.type, [value.type])
         return self.b.call(fn, [value])
 
     def at(self, base: Any, ty: Any, index: Any) -> Any:
@@ -428,12 +425,13 @@ def _packet_query(x: _IR, args: Any, query: str, test: Any) -> None:
 def _masked_store(mod: Any, vt: Any) -> Any:
     """``llvm.masked.store`` of the vector type ``vt`` (of floats or i32s)."""
     elem = "f32" if isinstance(vt.element, L.FloatType) else "i32"
-    name = f"llvm.masked.store.v{vt.count}{elem}.p0"
-    fn = mod.globals.get(name)
-    if fn is None:
-        fn = L.Function(mod, L.FunctionType(L.VoidType(), [
-            vt, L.PointerType(), L.IntType(32), L.VectorType(L.IntType(1), vt.count)]), name)
-    return fn
+    return _intrinsic(mod, f"llvm.masked.store.v{vt.count}{elem}.p0", L.VoidType(),
+                      [vt, L.PointerType(), L.IntType(32), L.VectorType(L.IntType(1), vt.count)])
+
+
+def _intrinsic(mod: Any, name: str, ret: Any, args: list[Any]) -> Any:
+    """The LLVM intrinsic ``name`` of ``mod``, declared on first use."""
+    return mod.globals.get(name) or L.Function(mod, L.FunctionType(ret, args), name)
 
 
 __all__ = ["build_module", "callback_addresses"]

@@ -260,8 +260,8 @@ def bsdf_instance(plugin: Any, textures: Any = None, prefix: str | None = None) 
     params["factors"] = sum(mode << (4 * i + 2 * j) for i, fs in enumerate(factors)
                             for j, mode in fs)
     params["w0"], params["w1"] = (tree.weights + [1.0, 1.0])[:TEXTURED_WEIGHTS]
-    leaves = [replace(leaf_instance(t.leaf, textures),
-                                  name=".".join((top, *t.path))) for t in terms]
+    leaves = [replace(leaf_instance(t.leaf, textures), name=".".join((top, *t.path)))
+              for t in terms]
     return Instance("mixture", params, plugin.id or plugin.type, leaves)
 
 

@@ -187,7 +187,7 @@ class Scene:
         loaded_quick = getattr(self._module, "quick", False)  # a PTX module has no tiers
         if self._module is not None and not again and (quick or not loaded_quick):
             return self._module
-        src, kw = self._jit_args()
+        src, kw = self._jit_inputs = self._jit_args()
         try:
             mod = jit(src, quick=quick and not jit_cached(src, **kw), **kw)
         except NoRayTracer:  # one line: what is missing, not the integrator's source
@@ -232,7 +232,7 @@ class Scene:
                 self._quick_renders += 1
                 if self._quick_renders >= RENDERS_BEFORE_TIER_UP:
                     try:
-                        self._tier_up = TierUp(*self._jit_args())
+                        self._tier_up = TierUp(*self._jit_inputs)  # what built `mod`
                     except Exception as e:  # noqa: BLE001 - no process to spare, or a
                         # scene that cannot be pickled: an optimization, the render goes on
                         warnings.warn(f"cannot build the full-tier kernels in the "
