@@ -56,6 +56,9 @@ def pipeline(build: Build, scene: SceneSpec | None = None,
         AdReverse(build.tape, build.seeds) if build.ad == "reverse" else AdForward(build.ad),
         # reverse mode, if asked: the sweeps read eliminated edge weights, not primal values
         *([Eliminate(build.eliminate)] if build.eliminate else []),
+        # the adjoint sweeps' zero adjoints and repeated partials, pruned before vectorize
+        # copies each of them for the lanes (it was half of what vectorize emitted)
+        *([Optimize()] if build.ad == "reverse" else []),
         Vectorize(build.width),  # SPMD over lanes with masks
         Optimize(),  # CSE broadcasts and masks
     ]

@@ -168,10 +168,11 @@ def parameter_slots(scene: SceneSpec, model: ColorModel = RGB
                                     for k, v in i.params.items()}, i.name, list(i.children))
                 for i in getattr(scene, kind)]
 
-    # emitter_kinds and shape_kinds stay None: the generic build handles every kind
+    # the kinds of emitter and shape are the scene's structure, as its plugin types: no
+    # parameter changes them, so the generic build folds them too
     spec = SceneSpec(instances("bsdfs"), instances("emitters"), instances("textures"),
-                     instances("bsdf_leaves"), integrators=instances("integrators"),
-                     accel=scene.accel)
+                     instances("bsdf_leaves"), scene.emitter_kinds, scene.shape_kinds,
+                     integrators=instances("integrators"), accel=scene.accel)
     return spec, np.asarray(values, np.float32)
 
 

@@ -356,7 +356,8 @@ class Scene:
                     f"emitter kinds: {', '.join(have) or 'none'}; {folded}", *lines]
         read = f"{len(values)} values of {n} instance(s) read from {PARAM_BUFFER} at run time"
         return [f"parameters: generic build, {read}",
-                "emitter kinds: generic build, every kind compiled", *lines]
+                f"emitter kinds: {', '.join(have) or 'none'}; sampling code for {lacks} "
+                "folded away (the scene's structure, in both builds)", *lines]
 
     def _param_args(self, mod: Any) -> list[np.ndarray]:
         """``PRM`` for a generic kernel that reads parameters (none when specialized)."""
