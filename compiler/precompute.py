@@ -9,9 +9,11 @@ lays them out at the end of ``PRM`` and the runtime fills them at scene load, bo
 :func:`tabulate`.
 
 The samples are computed natively: the table function becomes a kernel (the pipeline and
-the LLVM backend for the scalar target at O1, JIT-compiled in-process and kept per
-function: about a second), mapped over the sample points with the instance's parameters as uniform arguments.  Its code depends on the plugin,
-never on the values, so every instance and scene reuses it.  Tables are the place for the
+the LLVM backend for the scalar target at O1, about a second; kept per function in the
+process and in the kernel cache on disk, so that another scene or process with the same
+plugin builds nothing), mapped over the sample points with the instance's parameters as
+uniform arguments.  Its code depends on the plugin, never on the values, so every instance
+and scene reuses it.  Tables are the place for the
 expensive integrals (Mitsuba's are 64 x 32 x 32 and 64 x 128 x 128 evaluations of a
 microfacet integrand), far beyond what the reference interpreter runs in a second; small
 pure computations are folded by the ``evaluate`` pass instead.
@@ -143,12 +145,13 @@ def _store(path: Any, samples: np.ndarray) -> None:
 class _Kernel:
     """A compiled table function: ``(xs, params) -> values``."""
 
-    def __init__(self, name: str, lib: Any, address: int, args: list[Any],
-                 params: list[Param], used: set[str]) -> None:
+    def __init__(self, name: str, lib: Any, symbol: str, address: int, args: list[Any],
+                 defaults: dict[str, Any], used: set[str]) -> None:
         self.name, self.used = name, used
         self.lib = lib  # keeps the code mapped
+        self.symbol = symbol  # its entry point in lib
         self.args = args  # the CArgs after n
-        self.params = params  # the uniform parameters, with their defaults
+        self.defaults = defaults  # the uniform parameters' defaults, by name
         argtypes: list[Any] = [ctypes.c_int64]
         for a in args:
             argtypes += ([ctypes.c_void_p, ctypes.c_int64] if a.strided
@@ -159,7 +162,7 @@ class _Kernel:
     def __call__(self, xs: np.ndarray, values: dict[str, Any]) -> np.ndarray:
         xs = np.ascontiguousarray(xs, np.float32)
         out = np.zeros(len(xs), np.float32)
-        defaults = {p.value.name: p.default for p in self.params}
+        defaults = self.defaults
         call: list[Any] = [len(xs)]
         for a in self.args:
             if a.kind == "varying":
@@ -195,15 +198,78 @@ def _source(module: Module, fn: Function, has_x: bool) -> tuple[list[str], str]:
 def _kernel(module: Module, names: list[str], key: str, fn: Function, has_x: bool
             ) -> _Kernel:
     with _lock:
-        k = _kernels.get(key)
+        k = _kernels.get(key) or _load_kernel(key, fn.name)
         if k is None:
             sub = Module(structs=dict(module.structs))
             for name in names:  # a copy: the passes below rewrite what they compile
                 f = copy.deepcopy(module.functions[name])
                 f.attrs.pop("export", None)
                 sub.add(f)
-            k = _kernels[key] = _compile(sub, fn, has_x)
+            k = _compile(sub, fn, has_x)
+            _store_kernel(key, k)
+        _kernels[key] = k
         return k
+
+
+# A compiled table kernel is kept on disk too (``<cache>/tables/kernel-<sha256>.pickle``:
+# its library's path and how to call it), so that a new scene with the same plugin and
+# other values compiles nothing (a rough plastic's two tables took 0.9 s to build).
+
+
+def _kernel_entry(key: str) -> Any:
+    import hashlib
+
+    import llvmlite
+
+    from .. import __version__
+    from ..core.cachedir import cache_dir, compiler_fingerprint
+    from .build import Build
+
+    t = Build.of("scalar", "rgb").target
+    h = hashlib.sha256()
+    for part in (__version__, compiler_fingerprint(), llvmlite.__version__, t.triple, t.cpu,
+                 t.features, key):
+        b = part.encode()
+        h.update(f"{len(b)}:".encode() + b)
+    return cache_dir() / "tables" / f"kernel-{h.hexdigest()}.pickle"
+
+
+def _load_kernel(key: str, name: str) -> _Kernel | None:
+    """The kernel a process built before for ``key``, or None (none, or its library gone)."""
+    import pickle
+
+    from .backends.native_lib import address_of
+
+    try:
+        entry = pickle.loads(_kernel_entry(key).read_bytes())
+        lib = ctypes.CDLL(entry["so"])
+    except Exception:  # noqa: BLE001 - missing, damaged or stale: build it again
+        return None
+    address = address_of(lib, entry["symbol"])
+    if not address:
+        return None
+    return _Kernel(name, lib, entry["symbol"], address, entry["args"], entry["defaults"],
+                   entry["used"])
+
+
+def _store_kernel(key: str, k: _Kernel) -> None:
+    """Record ``k`` for :func:`_load_kernel` (atomically; silently not in a read-only
+    cache).  Its library is already in the native cache, under a name of its own."""
+    import os
+    import pickle
+    import tempfile
+
+    path = _kernel_entry(key)
+    entry = {"so": k.lib._name, "symbol": k.symbol, "args": k.args,
+             "defaults": k.defaults, "used": k.used}
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        fd, tmp = tempfile.mkstemp(dir=path.parent, suffix=".tmp")
+        with os.fdopen(fd, "wb") as f:
+            pickle.dump(entry, f)
+        os.replace(tmp, path)
+    except OSError:
+        pass
 
 
 def _reachable(module: Module, fn: Function) -> list[str]:
@@ -245,12 +311,13 @@ def _compile(sub: Module, fn: Function, has_x: bool) -> _Kernel:
     mod, tm = optimized_module(sub, build.target, speed=1)
     t = build.target
     lib = load_native(mod, tm, f"{t.triple} {t.cpu} {t.features}", f"table `{fn.name}`")
-    address = address_of(lib, "rdsl_" + c_name(wrapper.name))
+    symbol = "rdsl_" + c_name(wrapper.name)
+    address = address_of(lib, symbol)
     if not address:
         raise CompileError(f"table `{fn.name}`: the compiled library lacks its kernel", fn.loc)
     compiled = sub.functions[wrapper.name]
-    uniforms = [p for p in wrapper.params if p.uniform]
-    return _Kernel(fn.name, lib, address, c_args(compiled), uniforms, used_names)
+    defaults = {p.value.name: p.default for p in wrapper.params if p.uniform}
+    return _Kernel(fn.name, lib, symbol, address, c_args(compiled), defaults, used_names)
 
 
 def _wrapper(sub: Module, fn: Function, has_x: bool) -> Function:

@@ -236,3 +236,57 @@ def test_a_table_cannot_depend_on_a_texture():
     # a texture on a parameter the table does not use is fine
     params = table_params(read, Instance("roughplastic", {"diffuse_reflectance": TextureRef(0)}))
     assert tabulate(module, read.attrs["table"], params).shape == (64,)
+
+
+# ---------------------------------------------------------------------- the kernel on disk
+
+_OTHER_PROCESS = """
+import sys
+import numpy as np
+from pathlib import Path
+import rdsl.compiler.precompute as pc
+from rdsl.compiler.driver import frontend
+from rdsl.core.scene_spec import Instance
+
+built = []
+compile_ = pc._compile
+pc._compile = lambda *a: built.append(1) or compile_(*a)
+module = frontend(Path(sys.argv[1]))
+read = module.functions["roughplastic.external_transmittance.read"]
+params = pc.table_params(read, Instance("roughplastic", {"alpha": float(sys.argv[2])}))
+np.save(sys.argv[3], pc.tabulate(module, read.attrs["table"], params))
+print("built", len(built))
+"""
+
+
+def test_a_table_kernel_built_once_serves_other_processes_and_values(tmp_path):
+    """A process that tabulates a plugin's table for values not cached yet loads the kernel
+    another process built (it compiles nothing) and gets the samples this process computes;
+    with the kernel's library gone, it builds it again."""
+    import os
+    import subprocess
+    import sys
+
+    env = dict(os.environ, RDSL_CACHE_DIR=str(tmp_path / "cache"))
+    src = STDLIB / "bsdf" / "roughplastic.rdsl"
+
+    def run(alpha: float) -> tuple[int, np.ndarray]:
+        out = tmp_path / f"{alpha}.npy"
+        p = subprocess.run([sys.executable, "-c", _OTHER_PROCESS, str(src), str(alpha),
+                            str(out)], env=env, capture_output=True, text=True, timeout=300)
+        assert p.returncode == 0, p.stderr
+        return int(p.stdout.split()[-1]), np.load(out)
+
+    module = frontend(src)
+    read = module.functions["roughplastic.external_transmittance.read"]
+    here = {a: tabulate(module, read.attrs["table"],
+                        table_params(read, Instance("roughplastic", {"alpha": a})))
+            for a in (0.2, 0.4, 0.6)}
+    built, samples = run(0.2)  # the first process builds the kernel
+    assert built == 1 and np.array_equal(samples, here[0.2])
+    built, samples = run(0.4)  # other values: the samples are not cached, the kernel is
+    assert built == 0 and np.array_equal(samples, here[0.4])
+    for so in (tmp_path / "cache" / "native").glob("*.so"):
+        so.unlink()
+    built, samples = run(0.6)
+    assert built == 1 and np.array_equal(samples, here[0.6])
