@@ -89,3 +89,20 @@ def test_a_failed_background_build_keeps_the_quick_tier(fresh_cache):
     with pytest.warns(UserWarning, match="background build of the full-tier kernels failed"):
         assert job.load() is None
     assert "CompileError" in job.failure and "1:" in job.failure
+
+
+def test_a_loop_of_backward_passes_switches_to_the_full_tier(fresh_cache):
+    """``scene.backward`` tiers like a render: a small pass not cached yet runs the quick
+    adjoint kernel, a loop of them the full tier once built, the same gradient bit for bit."""
+    scene = rdsl.load_scene(CBOX, res=16)
+    img = scene.render(spp=1, seed=0, threads=2)
+    d_img, key = np.ones_like(img) / img.size, "red.reflectance.value"
+    first = scene.backward(d_img, [key], spp=1, seed=3, threads=2)[key]
+    (twin,) = [v for k, v in vars(scene).items() if k.startswith("_reverse_")]
+    assert twin._module.quick and np.all(first != 0)
+    t0 = time.monotonic()
+    while twin._module.quick:
+        assert time.monotonic() - t0 < 240, "the full tier never replaced the quick one"
+        time.sleep(0.05)
+        grad = scene.backward(d_img, [key], spp=1, seed=3, threads=2)[key]
+    assert np.array_equal(grad, first)

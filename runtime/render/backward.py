@@ -108,7 +108,9 @@ def backward(scene: Scene, d_img: Any, params: list[str], spp: int | None = None
     D = _pixel_adjoints(scene, d, spp, seed, threads)
     twin = ad_twin(scene, "reverse", elimination_threshold("reverse", eliminate), tape,
                    adjoint_seeds(chosen))
-    mod = twin.compile()
+    # as a render: the quick tier for a small pass not cached yet, the full one built in
+    # the background from the second such pass and used once ready (renderer.py's _tiered)
+    mod = twin._tiered(twin.compile(quick=twin.quick_fits(spp)))
     if mod.traces_rays:
         mod.bind_scene(scene.embree)
     prm = np.array(scene.prm, np.float32)

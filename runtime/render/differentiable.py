@@ -174,7 +174,7 @@ def _check_tables(scene: Scene, name: str) -> None:
     key, _ = _lookup(scene.params.slots, name)
     owner, param = key.rsplit(".", 1)
     param = "alpha" if param == "alpha_u" else param  # mitsuba_key's name
-    mod = scene.compile()
+    mod = scene.compile(quick=True)  # only its manifest is read: the quick tier will do
     entries = (mod.manifest or {}).get("tables") or []
     if not entries:
         return
@@ -250,7 +250,7 @@ def render_forward(scene: Scene, name: str, spp: int | None = None, seed: int | 
     if t.size not in (1, slot.size):
         raise ValueError(f"the tangent of `{name}` has {slot.size} value(s); got {t.size}")
     twin = ad_twin(scene, "forward")
-    twin.compile()
+    twin.compile(quick=twin.quick_fits(spp))
     twin.prm = np.array(scene.prm if scene._prm_set else params.values)
     twin.tangents = np.zeros_like(twin.prm)
     twin.tangents[slot.offset:slot.offset + slot.size] = t
