@@ -558,19 +558,26 @@ def clone_block(block: Block, mapping: dict[Value, Value]) -> Block:
     for old_arg, new_arg in zip(block.args, new.args):
         mapping.setdefault(old_arg, new_arg)
     get, out = mapping.get, new.instrs
-    for ins in block.instrs:  # what Instr(...) does, without its copies (inlining's hot loop)
-        c = Instr.__new__(Instr)
-        c.op, c.attrs, c.loc = ins.op, dict(ins.attrs), ins.loc
-        c.regions = [clone_block(r, mapping) for r in ins.regions] if ins.regions else []
-        c.operands = [get(v, v) for v in ins.operands]
-        ref, c.results = weakref.ref(c), []
-        for o in ins.results:
-            n = Value(o.type, o.name)
-            n._owner = ref
-            c.results.append(n)
-            mapping[o] = n
-        out.append(c)
+    for ins in block.instrs:
+        regions = [clone_block(r, mapping) for r in ins.regions] if ins.regions else []
+        out.append(clone_instr(ins, [get(v, v) for v in ins.operands], regions, mapping))
     return new
+
+
+def clone_instr(ins: Instr, operands: list[Value], regions: list[Block],
+                mapping: dict[Value, Value]) -> Instr:
+    """A copy of ``ins`` with these operands and regions and new results, which ``mapping``
+    records.  What ``Instr(...)`` does, without its copies (inlining's hot loop)."""
+    c = Instr.__new__(Instr)
+    c.op, c.attrs, c.loc = ins.op, dict(ins.attrs), ins.loc
+    c.operands, c.regions = operands, regions
+    ref, c.results = weakref.ref(c), []
+    for o in ins.results:
+        n = Value(o.type, o.name)
+        n._owner = ref
+        c.results.append(n)
+        mapping[o] = n
+    return c
 
 
 def __getattr__(name: str) -> Any:  # what moved to ir_abi.py, still importable from here

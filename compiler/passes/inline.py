@@ -23,7 +23,6 @@ bodies are inlined all the same.
 
 from __future__ import annotations
 
-import weakref
 from collections import deque
 from collections.abc import Callable
 from typing import Any
@@ -31,6 +30,7 @@ from typing import Any
 from ..diagnostics import CompileError, Diagnostic
 from ..interp import InterpError, eval_pure
 from ..ir import BOOL, Block, Function, Instr, Module, Op, ScalarType, Value, clone_block
+from ..ir import clone_instr
 from . import Pass, register
 
 
@@ -241,15 +241,8 @@ class _Folder:
                     for r, v in zip(ins.results, taken.instrs[-1].operands):
                         mapping[r] = get(v, v)
                     continue
-            c = Instr.__new__(Instr)
-            c.op, c.attrs, c.loc, c.operands = ins.op, dict(ins.attrs), ins.loc, operands
-            c.regions = [self.clone(r) for r in ins.regions] if ins.regions else []
-            ref, c.results = weakref.ref(c), []
-            for o in ins.results:
-                n = Value(o.type, o.name)
-                n._owner = ref
-                c.results.append(n)
-                mapping[o] = n
+            regions = [self.clone(r) for r in ins.regions] if ins.regions else []
+            c = clone_instr(ins, operands, regions, mapping)
             if c.op in _FOLDABLE:
                 _fold(c)
             out.append(c)
