@@ -564,6 +564,17 @@ def clone_block(block: Block, mapping: dict[Value, Value]) -> Block:
     return new
 
 
+def clone_function(fn: Function) -> Function:
+    """A copy of ``fn`` that shares no value, instruction or block with it (its attributes
+    copied one level deep), for a pass to rewrite while ``fn`` stays as it was."""
+    mapping: dict[Value, Value] = {}
+    params = [Param(Value(p.value.type, p.value.name), p.uniform, p.default) for p in fn.params]
+    for old, new in zip(fn.params, params):
+        mapping[old.value] = new.value
+    return Function(fn.name, params, list(fn.ret_types), clone_block(fn.body, mapping), fn.loc,
+                    dict(fn.attrs), list(fn.ret_names) if fn.ret_names is not None else None)
+
+
 def clone_instr(ins: Instr, operands: list[Value], regions: list[Block],
                 mapping: dict[Value, Value]) -> Instr:
     """A copy of ``ins`` with these operands and regions and new results, which ``mapping``

@@ -24,7 +24,6 @@ texture varies over the surface); anything else it uses is a diagnostic.
 
 from __future__ import annotations
 
-import copy
 import ctypes
 import threading
 from typing import Any
@@ -44,6 +43,7 @@ from .ir import (
     Param,
     ScalarType,
     Value,
+    clone_function,
 )
 
 _CTYPES = {"f32": ctypes.c_float, "i32": ctypes.c_int32, "u32": ctypes.c_uint32,
@@ -202,7 +202,7 @@ def _kernel(module: Module, names: list[str], key: str, fn: Function, has_x: boo
         if k is None:
             sub = Module(structs=dict(module.structs))
             for name in names:  # a copy: the passes below rewrite what they compile
-                f = copy.deepcopy(module.functions[name])
+                f = clone_function(module.functions[name])
                 f.attrs.pop("export", None)
                 sub.add(f)
             k = _compile(sub, fn, has_x)
