@@ -72,7 +72,9 @@ def test_table_samples_are_kept_on_disk(roughplastic, tmp_path, monkeypatch):
     opts, params = _table(roughplastic, 0.3)
     first = tabulate(roughplastic, opts, params)
     entries = list((tmp_path / "tables").iterdir())
-    assert [p.suffix for p in entries] == [".npy"]  # one entry, no temporary file left
+    # one entry of samples (and the kernel's, if this process built it), no temporary file
+    assert sorted(p.suffix for p in entries) in ([".npy"], [".npy", ".pickle"]), entries
+    entries = [p for p in entries if p.suffix == ".npy"]
     assert all(p.parent == tmp_path / "tables" for p in tmp_path.rglob("*.npy"))
 
     def no_kernel(*a, **k):
