@@ -99,23 +99,30 @@ def _disk_entry(text: str, xs: np.ndarray, params: dict[str, Any]) -> Any:
     it; an entry exists only for inputs that computed without error).  The key: the
     printed IR of the function and all it calls (their parameters' defaults included),
     the points, the values, rdsl's version, the compiler's fingerprint and LLVM's."""
-    import hashlib
     import platform
+
+    plain = (bool, int, float, np.bool_, np.integer, np.floating)
+    if not all(v is None or isinstance(v, plain) for v in params.values()):
+        return None
+    return _cache_file("", ".npy", platform.machine(), text, xs.tobytes(),
+                       repr(sorted(params.items())))
+
+
+def _cache_file(prefix: str, suffix: str, *parts: str | bytes) -> Any:
+    """``<cache>/tables/<prefix><sha256><suffix>``: the hash of rdsl's version, the
+    compiler's fingerprint, llvmlite's version and ``parts``."""
+    import hashlib
 
     import llvmlite
 
     from .. import __version__
     from ..core.cachedir import cache_dir, compiler_fingerprint
 
-    plain = (bool, int, float, np.bool_, np.integer, np.floating)
-    if not all(v is None or isinstance(v, plain) for v in params.values()):
-        return None
     h = hashlib.sha256()
-    for part in (__version__, compiler_fingerprint(), llvmlite.__version__,
-                 platform.machine(), text, xs.tobytes(), repr(sorted(params.items()))):
+    for part in (__version__, compiler_fingerprint(), llvmlite.__version__, *parts):
         b = part if isinstance(part, bytes) else part.encode()
         h.update(f"{len(b)}:".encode() + b)
-    return cache_dir() / "tables" / f"{h.hexdigest()}.npy"
+    return cache_dir() / "tables" / f"{prefix}{h.hexdigest()}{suffix}"
 
 
 def _load(path: Any, n: int) -> np.ndarray | None:
@@ -127,8 +134,13 @@ def _load(path: Any, n: int) -> np.ndarray | None:
 
 
 def _store(path: Any, samples: np.ndarray) -> None:
-    """Write atomically (a temporary file in the same folder, then a rename): another
-    process reads a whole entry or none."""
+    _write_atomically(path, lambda f: np.save(f, samples, allow_pickle=False))
+
+
+def _write_atomically(path: Any, dump: Any) -> None:
+    """``dump(file)`` into a temporary file in ``path``'s folder, then a rename: another
+    process reads a whole entry or none.  Silently nothing in a read-only or full cache
+    (what was computed is still right)."""
     import os
     import tempfile
 
@@ -136,9 +148,9 @@ def _store(path: Any, samples: np.ndarray) -> None:
         path.parent.mkdir(parents=True, exist_ok=True)
         fd, tmp = tempfile.mkstemp(dir=path.parent, suffix=".tmp")
         with os.fdopen(fd, "wb") as f:
-            np.save(f, samples, allow_pickle=False)
+            dump(f)
         os.replace(tmp, path)
-    except OSError:  # a read-only or full cache: the samples are still right
+    except OSError:
         pass
 
 
@@ -217,21 +229,10 @@ def _kernel(module: Module, names: list[str], key: str, fn: Function, has_x: boo
 
 
 def _kernel_entry(key: str) -> Any:
-    import hashlib
-
-    import llvmlite
-
-    from .. import __version__
-    from ..core.cachedir import cache_dir, compiler_fingerprint
     from .build import Build
 
     t = Build.of("scalar", "rgb").target
-    h = hashlib.sha256()
-    for part in (__version__, compiler_fingerprint(), llvmlite.__version__, t.triple, t.cpu,
-                 t.features, key):
-        b = part.encode()
-        h.update(f"{len(b)}:".encode() + b)
-    return cache_dir() / "tables" / f"kernel-{h.hexdigest()}.pickle"
+    return _cache_file("kernel-", ".pickle", t.triple, t.cpu, t.features, key)
 
 
 def _load_kernel(key: str, name: str) -> _Kernel | None:
@@ -255,21 +256,11 @@ def _load_kernel(key: str, name: str) -> _Kernel | None:
 def _store_kernel(key: str, k: _Kernel) -> None:
     """Record ``k`` for :func:`_load_kernel` (atomically; silently not in a read-only
     cache).  Its library is already in the native cache, under a name of its own."""
-    import os
     import pickle
-    import tempfile
 
-    path = _kernel_entry(key)
     entry = {"so": k.lib._name, "symbol": k.symbol, "args": k.args,
              "defaults": k.defaults, "used": k.used}
-    try:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        fd, tmp = tempfile.mkstemp(dir=path.parent, suffix=".tmp")
-        with os.fdopen(fd, "wb") as f:
-            pickle.dump(entry, f)
-        os.replace(tmp, path)
-    except OSError:
-        pass
+    _write_atomically(_kernel_entry(key), lambda f: pickle.dump(entry, f))
 
 
 def _reachable(module: Module, fn: Function) -> list[str]:

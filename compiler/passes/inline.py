@@ -99,7 +99,7 @@ class Inline(Pass):
                 continue
             if mapping:
                 ins.operands = [mapping.get(v, v) for v in ins.operands]
-            taken = _taken(ins)
+            taken = _taken(ins, ins.operands)
             if taken is not None:
                 work.appendleft((ins, taken.instrs[-1]))
                 work.extendleft(reversed(taken.instrs[:-1]))
@@ -184,11 +184,12 @@ def _constant(v: Value) -> Any:
     return a.get("value") if "trait" not in a else None
 
 
-def _taken(ins: Instr) -> Block | None:
-    """The region an ``if`` takes, if its condition is a constant."""
+def _taken(ins: Instr, operands: list[Value]) -> Block | None:
+    """The region an ``if`` takes, if its condition (``operands[0]``, renamed) is a
+    constant."""
     if ins.op is not Op.IF or len(ins.regions) != 2:
         return None
-    c = _constant(ins.operands[0])
+    c = _constant(operands[0])
     return None if c is None else ins.regions[0 if c else 1]
 
 
@@ -233,14 +234,12 @@ class _Folder:
         get = mapping.get
         for ins in instrs:
             operands = [get(v, v) for v in ins.operands]
-            if ins.op is Op.IF and len(ins.regions) == 2:
-                c = _constant(operands[0])
-                if c is not None:  # the taken region, in place; the results: its yield's
-                    taken = ins.regions[0 if c else 1]
-                    self.copy(taken.instrs[:-1], out)
-                    for r, v in zip(ins.results, taken.instrs[-1].operands):
-                        mapping[r] = get(v, v)
-                    continue
+            taken = _taken(ins, operands)
+            if taken is not None:  # the taken region, in place; the results: its yield's
+                self.copy(taken.instrs[:-1], out)
+                for r, v in zip(ins.results, taken.instrs[-1].operands):
+                    mapping[r] = get(v, v)
+                continue
             regions = [self.clone(r) for r in ins.regions] if ins.regions else []
             c = clone_instr(ins, operands, regions, mapping)
             if c.op in _FOLDABLE:
