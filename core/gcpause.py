@@ -12,7 +12,9 @@ def gc_paused() -> Iterator[None]:
     """Python's cycle collector off for a compile.  The IR is cyclic (values point at their
     instructions and back) and a compile allocates hundreds of thousands of objects, so the
     collector ran again and again over a growing heap: 40% of the passes' time on a
-    material-preview scene (bench/scene_set.py).  The garbage is collected once, afterwards."""
+    material-preview scene (bench/scene_set.py).  A compile leaves no cycles behind (the
+    frontend, the IR and the LLVM module are freed by reference counting:
+    tests/test_compile_garbage.py), so nothing is left for the collector afterwards either."""
     was = gc.isenabled()
     gc.disable()
     try:

@@ -49,3 +49,5 @@ def compile_to_ir(path_or_source: str | Path, filename: str | None = None,
     except RecursionError:
         raise CompileError("program too deeply nested",
                            ir.Loc(checked.main_file, 0, 0)) from None
+    finally:
+        checked.release()

@@ -189,23 +189,24 @@ class _Checker(Declarations):
 
     def _check_recursion(self) -> None:
         done: set[FnInfo] = set()
-        stack: list[FnInfo] = []
-
-        def visit(fn: FnInfo) -> None:
-            stack.append(fn)
-            for callee, loc in self.calls.get(fn, []):
-                if callee in stack:
-                    cycle = stack[stack.index(callee):] + [callee]
-                    chain = " -> ".join(f"`{f.name}`" for f in cycle)
-                    raise err(f"recursion is not supported: {chain}", loc)
-                if callee not in done:
-                    visit(callee)
-            stack.pop()
-            done.add(fn)
-
         for fn in self.functions + [f for p in self.plugins for f in p.fns.values()]:
             if fn not in done:
-                visit(fn)
+                self._visit_calls(fn, done, [])
+
+    def _visit_calls(self, fn: FnInfo, done: set[FnInfo], stack: list[FnInfo]) -> None:
+        """Depth first through the calls from ``fn``; a call back into ``stack`` is a
+        diagnostic.  (A method, not a closure: a recursive closure is a reference cycle,
+        which kept the whole checker and its AST alive until Python's cycle collector ran.)"""
+        stack.append(fn)
+        for callee, loc in self.calls.get(fn, []):
+            if callee in stack:
+                cycle = stack[stack.index(callee):] + [callee]
+                chain = " -> ".join(f"`{f.name}`" for f in cycle)
+                raise err(f"recursion is not supported: {chain}", loc)
+            if callee not in done:
+                self._visit_calls(callee, done, stack)
+        stack.pop()
+        done.add(fn)
 
     # ---------------------------------------------------------------- functions
     def _check_fn(self, fn: FnInfo, plugin: PluginInfo | None) -> None:

@@ -79,3 +79,17 @@ class CheckedProgram:
     structs: dict[str, StructType]
     functions: list[FnInfo]  # top-level functions of every module
     plugins: list[PluginInfo]
+
+    def release(self) -> None:
+        """Cut the references between the checked entities and the AST (a call's
+        ``target`` is its FnInfo, whose ``decl`` holds the call...), so that the program is
+        freed by reference counting when the last reference goes, not by Python's cycle
+        collector: a compile's AST is tens of thousands of objects, and collecting them
+        took a tenth of a compile (0.1-0.2 s; the IR has no cycles, see Value.owner)."""
+        for fn in [*self.functions, *(f for p in self.plugins for f in p.fns.values())]:
+            fn.decl = fn.module = fn.plugin = None  # type: ignore[assignment]
+        for pl in self.plugins:
+            pl.decl = pl.module = None  # type: ignore[assignment]
+            pl.fns = {}
+        self.modules = []
+

@@ -275,31 +275,15 @@ def jit(source_or_path: str | os.PathLike, target: str | Target = "host",
         mod.source_files, mod.quick = files, quick
         return mod
 
-    from ..compiler import driver  # only now: a cache hit never imports the compiler
-    from ..compiler.backends.clib import build_library
     from ..core.gcpause import gc_paused
 
-    module, _ = driver.compile_kernels(source_or_path, build, **options)
+    with gc_paused():  # one pause for the whole compile, which ends with its IR freed
+        tmp = _compile_into(source_or_path, build, quick, options,
+                            (root, key) if cache else None)
     if not cache:
-        tmp = Path(tempfile.mkdtemp(prefix="rdsl-jit-"))
-        atexit.register(shutil.rmtree, tmp, True)
-        with gc_paused():
-            build_library(module, build.target, tmp, STEM, quick)
         mod = load(tmp / STEM, compile_seconds=time.perf_counter() - t0)
         mod.source_files, mod.quick = files, quick
         return mod
-    try:
-        root.mkdir(parents=True, exist_ok=True)
-        tmp = Path(tempfile.mkdtemp(prefix=f".{key[:16]}-", dir=root))
-    except OSError as e:
-        raise CompileError(f"cannot write to the kernel cache `{root}`: {e.strerror or e} "
-                           "(set $RDSL_CACHE_DIR)") from None
-    try:
-        with gc_paused():  # lowering to LLVM builds as many objects again
-            build_library(module, build.target, tmp, STEM, quick)
-    except BaseException:
-        shutil.rmtree(tmp, ignore_errors=True)
-        raise
     try:
         os.rename(tmp, entry)  # atomic: readers see a complete entry or none
     except OSError:
@@ -318,3 +302,32 @@ def jit(source_or_path: str | os.PathLike, target: str | Target = "host",
     mod = load(entry / STEM, compile_seconds=time.perf_counter() - t0)
     mod.source_files, mod.quick = files, quick
     return mod
+
+
+def _compile_into(source_or_path: str | os.PathLike, build: Build, quick: bool,
+                  options: dict[str, Any], cache: tuple[Path, str] | None) -> Path:
+    """Compile and write the library into a new folder: one in the cache folder (``cache``:
+    the folder and the entry's key; the new folder is removed again if the build fails) or,
+    with ``cache`` None, a temporary one removed at exit."""
+    from ..compiler import driver  # only now: a cache hit never imports the compiler
+    from ..compiler.backends.clib import build_library
+
+    module, _ = driver.compile_kernels(source_or_path, build, **options)
+    if cache is None:
+        tmp = Path(tempfile.mkdtemp(prefix="rdsl-jit-"))
+        atexit.register(shutil.rmtree, tmp, True)
+        build_library(module, build.target, tmp, STEM, quick)
+        return tmp
+    root, key = cache
+    try:
+        root.mkdir(parents=True, exist_ok=True)
+        tmp = Path(tempfile.mkdtemp(prefix=f".{key[:16]}-", dir=root))
+    except OSError as e:
+        raise CompileError(f"cannot write to the kernel cache `{root}`: {e.strerror or e} "
+                           "(set $RDSL_CACHE_DIR)") from None
+    try:
+        build_library(module, build.target, tmp, STEM, quick)
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise
+    return tmp

@@ -123,10 +123,13 @@ def _checked(path: Path, kind: str, name: str, line: int, mtime: int
 
     with gc_paused():
         prog = check(path)
-    for pl in prog.plugins:
-        if pl.name == name and pl.module.key == str(path):
-            fns = {n: (tuple(f.param_types), f.ret) for n, f in pl.fns.items()}
-            return {q.name: q for q in declared_params(pl)}, fns
+    try:
+        for pl in prog.plugins:
+            if pl.name == name and pl.module.key == str(path):
+                fns = {n: (tuple(f.param_types), f.ret) for n, f in pl.fns.items()}
+                return {q.name: q for q in declared_params(pl)}, fns
+    finally:
+        prog.release()  # freed now, not by the cycle collector (see its docstring)
     raise CompileError(f"`{kind} {name}` seems declared here, but the file declares no such "
                        "plugin (is the line inside a comment?)", Loc(str(path), line, 1))
 

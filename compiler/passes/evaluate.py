@@ -56,30 +56,35 @@ def evaluable(module: Module) -> set[str]:
     themselves or through a callee."""
     pure: dict[str, bool] = {}
     loops: dict[str, bool] = {}
+    return {name for name in module.functions
+            if _pure(module, name, (), pure, loops) and loops[name]}
 
-    def visit(name: str, stack: tuple[str, ...]) -> bool:
-        if name in pure:
-            return pure[name]
-        fn = module.functions.get(name)
-        if fn is None or name in stack:  # unknown or recursive: `inline` reports it
-            return False
-        ok = all(_plain(p.value.type) for p in fn.params) and all(map(_plain, fn.ret_types))
-        has_loop = False
-        for ins in fn.walk():
-            if not ok:
-                break
-            if ins.op is Op.CALL:
-                callee = ins.attrs["callee"]
-                ok = visit(callee, (*stack, name))
-                has_loop = has_loop or loops.get(callee, False)
-                continue
-            ok = (ins.op in PURE_OPS or ins.op in _CONTROL) and all(
-                _plain(r.type) for r in ins.results)
-            has_loop = has_loop or ins.op is Op.LOOP
-        pure[name], loops[name] = ok, has_loop
-        return ok
 
-    return {name for name in module.functions if visit(name, ()) and loops[name]}
+def _pure(module: Module, name: str, stack: tuple[str, ...], pure: dict[str, bool],
+          loops: dict[str, bool]) -> bool:
+    """Whether function ``name`` is pure (memoized in ``pure``; ``loops``: whether it runs
+    a loop).  A function, not a recursive closure: that would be a reference cycle holding
+    the module until Python's cycle collector ran."""
+    if name in pure:
+        return pure[name]
+    fn = module.functions.get(name)
+    if fn is None or name in stack:  # unknown or recursive: `inline` reports it
+        return False
+    ok = all(_plain(p.value.type) for p in fn.params) and all(map(_plain, fn.ret_types))
+    has_loop = False
+    for ins in fn.walk():
+        if not ok:
+            break
+        if ins.op is Op.CALL:
+            callee = ins.attrs["callee"]
+            ok = _pure(module, callee, (*stack, name), pure, loops)
+            has_loop = has_loop or loops.get(callee, False)
+            continue
+        ok = (ins.op in PURE_OPS or ins.op in _CONTROL) and all(
+            _plain(r.type) for r in ins.results)
+        has_loop = has_loop or ins.op is Op.LOOP
+    pure[name], loops[name] = ok, has_loop
+    return ok
 
 
 @register
