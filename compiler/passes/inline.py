@@ -53,6 +53,9 @@ class Inline(Pass):
         # only what the exported functions reach (the rest is deleted below): a scene's
         # module holds every function of the stdlib files it imports
         roots = [f for f in module.functions.values() if f.attrs.get("export")]
+        partial = _partials_and_helpers()
+        self.movable = {n for n in _called_once(module) - self.keep - partial
+                        if module.functions[n].attrs.get("source_name") not in partial}
         for fn in roots or list(module.functions.values()):
             self._inline_function(fn, None)
         called = _still_called(module)
@@ -92,8 +95,8 @@ class Inline(Pass):
         work: deque[Instr | tuple[Instr, Instr]] = deque(block.instrs)
         while work:
             ins = work.popleft()
-            if isinstance(ins, tuple):  # a folded `if`: its results are what was yielded
-                folded, y = ins
+            if isinstance(ins, tuple):  # a folded `if` or a moved call: its results are
+                folded, y = ins  # what its region yielded or its body returned
                 for r, v in zip(folded.results, y.operands):
                     mapping[r] = mapping.get(v, v)
                 continue
@@ -119,6 +122,13 @@ class Inline(Pass):
                 out.append(ins)
                 continue
             args = ins.operands  # renamed above
+            if callee.name in self.movable:  # its only call: move the body here, and fold
+                # it as the caller's own instructions (its results: the return's, renamed)
+                body, callee.body.instrs = callee.body.instrs, []
+                mapping.update((p.value, a) for p, a in zip(callee.params, args))
+                work.appendleft((ins, body[-1]))
+                work.extendleft(reversed(body[:-1]))
+                continue
             local = {p.value: a for p, a in zip(callee.params, args)}
             body = _Folder(local).clone(callee.body)
             ret = body.instrs.pop()
@@ -151,6 +161,32 @@ class Inline(Pass):
         rule = Instr(Op.AD_RULE, [*args, y, *partials], [y.type], {}, loc=call.loc)
         out.append(rule)
         mapping[call.results[0]] = rule.result
+
+
+def _called_once(module: Module) -> set[str]:
+    """The functions, exported ones aside, with exactly one call site in the module.
+    ``inline`` moves the body of such a function to its call instead of copying it:
+    bottom-up, each function is inlined into once, so nothing else needs the body (70% of
+    what a scene's kernel copied was the bodies of functions called once: a plugin's
+    method, a dispatch).  Every function's calls count, reachable or not: the partials
+    that ``_mark`` inlines are reached by no call."""
+    sites: dict[str, int] = {}
+    for fn in module.functions.values():
+        for ins in fn.walk():
+            if ins.op is Op.CALL:
+                callee = ins.attrs["callee"]
+                sites[callee] = sites.get(callee, 0) + 1
+    return {n for n, k in sites.items()
+            if k == 1 and n in module.functions and not module.functions[n].attrs.get("export")}
+
+
+def _partials_and_helpers() -> set[str]:
+    """The names of the math functions with declared partials and of their partials:
+    ``_mark`` wraps the former's inlined body in an ``ad.rule`` and copies the latter,
+    so they are always copied, never moved."""
+    from .ad_forward import PARTIALS
+
+    return {*PARTIALS, *(h for helpers in PARTIALS.values() for h in helpers)}
 
 
 def _still_called(module: Module) -> set[str]:
