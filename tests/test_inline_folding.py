@@ -49,3 +49,45 @@ def test_folding_keeps_the_behaviour(x):
     want = run_function(before, "kernel", [np.float32(x)])
     got = run_function(after, "kernel", [np.float32(x)])
     np.testing.assert_array_equal(np.float32(got[0]), np.float32(want[0]))
+
+
+ONCE = """
+fn twice_called(x: Float) -> Float { return x * x + 1.0; }
+fn once_called(x: Float, k: Int) -> Float {
+    var a = twice_called(x);
+    if k == 3 { a = a * 2.0; } else { a = a - 1.0; }
+    return a + twice_called(a);
+}
+fn kernel(x: Float) -> Float { return once_called(x, 3) * 0.5; }
+"""
+
+
+def _library(src: str):
+    """``src`` lowered, with only `kernel` exported (the others as if imported)."""
+    m = frontend(src)
+    for name, fn in m.functions.items():
+        if name != "kernel":
+            fn.attrs.pop("export", None)
+    return m
+
+
+def test_a_function_called_once_is_moved_and_one_called_twice_copied():
+    m = _library(ONCE)
+    body_of_once = {id(i) for i in m.functions["once_called"].body.instrs}
+    body_of_twice = {id(i) for i in m.functions["twice_called"].body.instrs}
+    run_passes(m, [Inline()])
+    kernel = {id(i) for i in m.functions["kernel"].walk()}
+    assert set(m.functions) == {"kernel"}
+    assert body_of_once - kernel  # the return is gone, and the folded `if`
+    assert len(body_of_once & kernel) >= 3  # the rest are the same objects: moved
+    assert not body_of_twice & kernel  # copied (twice), the original left behind
+    assert not any(i.op is Op.IF for i in m.functions["kernel"].walk())  # k == 3 folded
+
+
+@pytest.mark.parametrize("x", [-2.0, -0.0, 0.5, 3.0, np.inf, np.nan])
+def test_moving_keeps_the_behaviour(x):
+    before, after = frontend(ONCE), _library(ONCE)
+    run_passes(after, [Inline()])
+    want = run_function(before, "kernel", [np.float32(x)])
+    got = run_function(after, "kernel", [np.float32(x)])
+    np.testing.assert_array_equal(np.float32(got[0]), np.float32(want[0]))
