@@ -12,7 +12,8 @@ them from the renderer's kernel cache), the peak RSS of the process and the reco
 albedo.  ``--cold`` adds a first round with empty kernel caches (rdsl: a fresh
 ``$RDSL_CACHE_DIR``; Mitsuba: a fresh ``$HOME``, under which Dr.Jit keeps ``~/.drjit``).
 Before the measured rounds each renderer runs 2 iterations once, unmeasured, which fills
-its default kernel cache (a warm run loads its kernels from there).
+its default kernel cache (a warm run loads its kernels from there), and the benchmark waits
+for the full-tier builds rdsl left running in the background.
 Mitsuba runs ``llvm_ad_rgb`` (``DRJIT_LIBLLVM_PATH``, default libLLVM 19 as Debian installs
 it).  Not a test: run it by hand (docs/ad.md has the numbers).
 """
@@ -121,6 +122,26 @@ def spawn(who: str, args, cold: bool, iterations: int | None = None) -> dict:
     return r
 
 
+def wait_for_background_builds(limit: float = 300.0) -> None:
+    """Wait until no full-tier build that an rdsl process left running is still running
+    (runtime/render/tier_up.py: a build outlives its process).  Otherwise, after a change of
+    the compiler (new cache keys), the first warm run would render with the quick tier
+    while the build competes for the cores (measured: 0.47 s/iter against 0.17)."""
+    t = time.perf_counter()
+    while time.perf_counter() - t < limit:
+        running = False
+        for cmdline in Path("/proc").glob("[0-9]*/cmdline"):
+            try:
+                running = b"rdsl.runtime.render.tier_up" in cmdline.read_bytes()
+            except OSError:
+                continue
+            if running:
+                break
+        if not running:
+            return
+        time.sleep(0.5)
+
+
 def table(runs: list[dict]) -> None:
     print(f"{'renderer':<8} {'cache':<5} {'s/iter':>7} {'first s':>8} {'RSS MiB':>8} "
           f"{'process s':>9} {'loss 0 -> last':>20}  recovered (truth)")
@@ -165,6 +186,7 @@ def main() -> int:
     runs = []
     for who in ("rdsl", "mitsuba"):  # fill the default kernel caches (not measured)
         spawn(who, args, False, iterations=2)
+    wait_for_background_builds()
     schedule = [True] * args.cold + [False] * args.rounds
     for i, cold in enumerate(schedule):
         order = ("rdsl", "mitsuba") if i % 2 == 0 else ("mitsuba", "rdsl")
