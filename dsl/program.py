@@ -92,4 +92,3 @@ class CheckedProgram:
             pl.decl = pl.module = None  # type: ignore[assignment]
             pl.fns = {}
         self.modules = []
-

@@ -159,6 +159,7 @@ def release_module(lowered: L.Module) -> None:
         fn.blocks, fn.args, fn.parent, fn.return_value = [], (), None, None
     lowered.globals.clear()
 
+
 # Bodies of more IR instructions than this are called, not inlined, by their range loops
 # (see _ModuleLowering.body): 13% less CPU time to compile a large BSDF's test harness.
 INLINE_BODY_LIMIT = 1500
