@@ -115,6 +115,8 @@ class Module:
             raise ValueError("this library traces no rays, so it takes no scene") from None
         slot.value = scene.handle
         self._scene = scene
+        for k in self.kernels.values():  # a kernel outlives its module: the scene too
+            k._scene = scene
 
     def __getitem__(self, name: str) -> Kernel:
         try:

@@ -182,7 +182,7 @@ class CudaKernel(Kernel):
 
     def _buffer(self, p: dict[str, Any], value: Any) -> np.ndarray:
         arr = super()._buffer(p, value)
-        self.module._lib.sizes[arr.ctypes.data] = arr.nbytes  # what to copy for the call
+        self._lib.sizes[arr.ctypes.data] = arr.nbytes  # what to copy for the call
         return arr
 
     def _run(self, n: int, flat: list[Any], threads: int | None) -> list:

@@ -13,6 +13,7 @@ import ctypes
 import math
 import numbers
 import os
+import weakref
 from concurrent.futures import Future, ThreadPoolExecutor
 from typing import Any
 
@@ -79,7 +80,12 @@ class Kernel:
     """One compiled kernel.  Call it with arrays (see ``__call__``); ``signature`` shows how."""
 
     def __init__(self, module: Any, info: dict[str, Any], lib: ctypes.CDLL) -> None:
-        self.module = module
+        # the module holds its kernels; a kernel holds what its calls need (the library, the
+        # bound scene) but not the module, so that a module no one holds is freed at once,
+        # with its kernels' output pools, rather than by the cycle collector's next round
+        self._module = weakref.ref(module)
+        self._lib = lib
+        self._scene: Any = None  # Module.bind_scene's: kept alive while the kernel is
         self.info = info
         self.name: str = info["name"]
         self.width: int = module.width
@@ -94,6 +100,11 @@ class Kernel:
         self.pool = OutputPool()  # fresh outputs' blocks, reused once no result holds them
         self._strided = [bool(a.get("strided")) for a in self.args]
         self._bind_native(lib)
+
+    @property
+    def module(self) -> Any:
+        """The module this kernel came from (None once nothing else holds it)."""
+        return self._module()
 
     def _bind_native(self, lib: ctypes.CDLL) -> None:
         """Look the entry points up in ``lib`` and declare their C argument types."""
