@@ -33,6 +33,9 @@ class Build:
     # reverse mode: the loads differentiated, None for all: elements of the generic build's
     # parameter buffer PRM, and "T" for the texel buffer (passes/ad_reverse.py)
     seeds: tuple[int | str, ...] | None = None
+    # reverse mode: the tape covers every iteration (no loop is expected to run more than
+    # `tape` iterations; a lane that does is flagged and skipped: passes/ad_checkpoint.py)
+    tape_covers: bool = False
 
     @classmethod
     def of(cls, target: str | Target = "host", variant: str | ColorModel = "rgb",

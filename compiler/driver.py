@@ -53,7 +53,8 @@ def pipeline(build: Build, scene: SceneSpec | None = None,
         Scalarize(),  # aggregates become scalars; kernel ABI recorded
         Optimize(),  # forward extracts, CSE the leaves
         # tangents (forward mode), adjoints (reverse), or derivative() = 0 without AD
-        AdReverse(build.tape, build.seeds) if build.ad == "reverse" else AdForward(build.ad),
+        AdReverse(build.tape, build.seeds, build.tape_covers) if build.ad == "reverse"
+        else AdForward(build.ad),
         # reverse mode, if asked: the sweeps read eliminated edge weights, not primal values
         *([Eliminate(build.eliminate)] if build.eliminate else []),
         # the adjoint sweeps' zero adjoints and repeated partials, pruned before vectorize

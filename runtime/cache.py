@@ -46,6 +46,8 @@ def cache_key(source_text: str, files: Iterable[os.PathLike | str], build: Build
         part("eliminate", str(build.eliminate))
     if getattr(build, "tape", 0):
         part("tape", str(build.tape))
+    if getattr(build, "tape_covers", False):
+        part("tape_covers", "1")
     if getattr(build, "seeds", None) is not None:
         part("seeds", json.dumps(list(build.seeds)))
     part("options", json.dumps(options, sort_keys=True, default=repr))

@@ -7,6 +7,11 @@ contraction; ``tests/test_quick_tier.py`` checks a render of each), and O0 compi
 the full tier, as users get it: the backend's op semantics, the differential corpus, the
 kernel ABI and layouts, the bit-identical reference images and the tiers' own test.  Run
 ``RDSL_QUICK=0 pytest tests`` to build everything at the full tier.
+
+Assigning a scene parameter does not start a speculative build of the adjoint kernel
+(``RDSL_PREBUILD=0``, runtime/render/prebuild.py) but in tests/test_prebuild.py: the
+suite's workers keep both cores busy, and most tests that assign parameters never call
+``backward``.
 """
 
 from __future__ import annotations
@@ -16,6 +21,7 @@ import os
 import pytest
 
 os.environ.setdefault("RDSL_QUICK", "1")
+os.environ.setdefault("RDSL_PREBUILD", "0")
 
 FULL_TIER = {"test_llvm_backend", "test_differential", "test_c_abi", "test_kernel_layouts",
              "test_bit_identical", "test_quick_tier"}

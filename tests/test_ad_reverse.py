@@ -92,6 +92,52 @@ def test_checkpoint_tape_gives_the_recomputed_gradients_bit_for_bit():
             np.testing.assert_array_equal(got, want)
 
 
+def test_a_covering_tape_flags_the_lanes_it_does_not_cover():
+    # Build.tape_covers: no code for iterations beyond the tape.  The loop runs up to 7
+    # times (6 bodies and the exit test): a tape of 16 covers every lane (the same
+    # gradients as recomputation, bit for bit); a tape of 3 does not, and the lanes that
+    # ran longer write their trip count into their row's overflow word (element 0) and skip
+    # the loop's adjoint (their gradient is incomplete: the caller runs the pass again with
+    # a kernel built without tape_covers), while the others still get theirs exactly
+    import dataclasses
+
+    from rdsl.compiler.passes.ad_checkpoint import OVERFLOW
+
+    x = np.linspace(-0.5, 2.0, 37).astype(np.float32)
+    prm = np.array([0.7, 1.3, 0.8, 2.0, 0.9], np.float32)
+    a = np.random.default_rng(0).standard_normal(x.size).astype(np.float32)
+    i = np.arange(x.size, dtype=np.int32)
+    build = rdsl.Build.of("host", "rgb", ad="reverse")
+
+    def run(cap: int, covers: bool, lanes: np.ndarray):
+        k = rdsl.jit(LOOP, build=dataclasses.replace(build, tape=cap, tape_covers=covers)).k
+        floats = next(p["tape_floats"] for p in k.info["params"] if p["name"] == "ad_tape")
+        blocks = -(-x.size // TAPE_LANES)
+        tape = np.zeros(blocks * TAPE_LANES * floats, np.float32)
+        words = tape.view(np.int32).reshape(blocks, floats, TAPE_LANES)[:, OVERFLOW]
+        words[:] = -1
+        rows = (i // TAPE_LANES) * TAPE_LANES * floats + i % TAPE_LANES
+        grads = []
+        for lane in lanes:  # one sample's gradient row at a time (they all share PRM)
+            grad = np.zeros(NPRM, np.float32)
+            mask = np.arange(x.size) == lane
+            k(x, prm, a * mask, grad, np.zeros(x.size, np.int32), tape, rows)
+            grads.append(grad)
+        return np.array(grads), words.reshape(-1)[:x.size].copy()
+
+    every = np.arange(x.size)
+    want, _ = run(16, False, every)
+    got, words = run(16, True, every)
+    np.testing.assert_array_equal(got, want)
+    assert np.all(words == -1)
+    short, words = run(3, True, every)
+    over = words != -1
+    assert over.any() and not over.all()
+    assert np.all(words[over] > 3)  # the trip counts, beyond the tape
+    np.testing.assert_array_equal(short[~over], want[~over])
+    assert np.any(short[over] != want[over])
+
+
 def test_detach_stops_the_gradient():
     rev, _ = _builds("fn k(PRM: [Float]) -> Float { return detach(PRM[0]) * PRM[0]; }")
     grad = np.zeros(1, np.float32)
@@ -182,6 +228,31 @@ def test_cbox_backward_tape_equals_recomputation_with_russian_roulette():
     for t in (2, 16):
         for name in NAMES:
             np.testing.assert_array_equal(got[t][name], got[0][name], err_msg=f"{t} {name}")
+
+
+@needs_cbox
+def test_cbox_backward_runs_again_when_the_tape_does_not_cover(monkeypatch):
+    # a max_depth under the tape builds the kernel without the code for bounces beyond it
+    # (Build.tape_covers); forced on a scene whose paths outrun the tape (max_depth 40),
+    # the lanes that do are flagged and backward runs again without it: the gradients are
+    # those of the kernel that replays, bit for bit
+    from rdsl.runtime.render import backward as bw
+
+    assert bw.tape_covers(rdsl.load_scene(CBOX, res=8, max_depth=8), bw.TAPE)
+    assert not bw.tape_covers(rdsl.load_scene(CBOX, res=8, max_depth=-1), bw.TAPE)
+    assert not bw.tape_covers(rdsl.load_scene(CBOX, res=8, max_depth=bw.TAPE), bw.TAPE)
+    d = np.random.default_rng(5).standard_normal((8, 8, 3))
+    plain = rdsl.load_scene(CBOX, res=8, max_depth=40)
+    plain.params["path.rr_depth"] = 40  # no roulette: most paths last 40 bounces
+    want = plain.backward(d, params=NAMES[:1], spp=4, seed=2)
+    monkeypatch.setattr(bw, "tape_covers",
+                        lambda scene, tape: not getattr(scene, "_tape_overflowed", False))
+    forced = rdsl.load_scene(CBOX, res=8, max_depth=40)
+    forced.params["path.rr_depth"] = 40
+    got = forced.backward(d, params=NAMES[:1], spp=4, seed=2)
+    assert forced._tape_overflowed  # the covering kernel's pass was caught and redone
+    np.testing.assert_array_equal(got[NAMES[0]], want[NAMES[0]])
+    assert np.any(want[NAMES[0]] != 0)
 
 
 def _tape_floats(scene, names, tape=16):

@@ -20,6 +20,15 @@ The values the adjoint's sweep of an iteration reads from its run of the body fo
 intermediate values: partial derivatives, branch conditions, scatter indices) are stored
 the same way, after the carried state, so that the adjoint's iteration k < C loads them
 instead of running the body forward again (:meth:`Checkpoints.keep`); beyond C it runs it.
+
+With ``covers`` (``Build.tape_covers``: the caller expects no loop to run more than C
+iterations, as a path tracer's bounce loop with ``max_depth`` < C), the adjoint has no code
+for the iterations beyond C: no replay from the last checkpoint, no run of the body
+forward; every iteration's state and forward values are loaded.  Element 0 of each row
+is then an overflow word: a lane whose taped loop ran more than C iterations stores its
+count there (as a Float's bits) and skips that loop's adjoint, so that the caller, which
+set the word to -1 (all bits) before the pass, sees the overflow and runs the pass again
+with a kernel built without ``covers`` (runtime/render/backward.py).
 """
 
 from __future__ import annotations
@@ -31,6 +40,7 @@ from ..ir import BOOL, F32, I32, U32, U64, Block, BufferType, Builder, Function,
 
 TAPE, TAPE_ROW = "ad_tape", "ad_row_tape"
 TAPE_LANES = 16  # rows interleaved per block of this many lanes (the widest SIMD packet)
+OVERFLOW = 0  # with ``covers``: the element of a row that flags more iterations than C
 _TYPES = (F32, I32, U32, BOOL, U64)
 
 
@@ -38,10 +48,10 @@ _TYPES = (F32, I32, U32, BOOL, U64)
 class Checkpoints:
     """The tape of one function: ``cap`` (C) checkpoints per taped loop."""
 
-    def __init__(self, cap: int) -> None:
-        self.cap = cap
+    def __init__(self, cap: int, covers: bool = False) -> None:
+        self.cap, self.covers = cap, covers and cap > 0
         self.buf, self.row = Value(BufferType(F32), TAPE), Value(I32, TAPE_ROW)
-        self.size = 0  # floats per lane
+        self.size = 1 if self.covers else 0  # floats per lane (the overflow word first)
         self.stores: set[int] = set()  # the instructions the primal loops got (their ids)
         self.loops: dict[int, tuple[int, int]] = {}  # a taped loop -> (offset, floats)
         self.slots: dict[int, Value] = {}  # a taped loop -> its slot, in its body
@@ -71,10 +81,14 @@ class Checkpoints:
 
     def load(self, ins: Instr, k: Value, b: Builder) -> tuple[list[Value], Value] | None:
         """For taped loop ``ins``: its carried values at checkpoint c = min(k, C - 1) and
-        k - c, the iterations left to run from there to reach iteration k (else None)."""
+        k - c, the iterations left to run from there to reach iteration k (else None).
+        With ``covers``: c = k, and k - c is None (no iterations to run)."""
         if id(ins) not in self.loops:
             return None
         offset, size = self.loops[id(ins)]
+        if self.covers:
+            xs = iter([b.op(Op.LOAD, F32, self.buf, i) for i in self._slot(k, size, offset, b)])
+            return [*[_unpack(xs, a.type, b) for a in ins.regions[0].args[:-1]], k], None
         last = b.const(self.cap - 1, I32)
         c = b.op(Op.SELECT, I32, b.op(Op.LT, BOOL, k, last), k, last)
         xs = iter([b.op(Op.LOAD, F32, self.buf, i) for i in self._slot(c, size, offset, b)])
@@ -106,6 +120,12 @@ class Checkpoints:
         body.instrs.append(end)
         self.size += (self.cap + 1) * size
         b = Builder(Block(), loop.loc)
+        if self.covers:  # every iteration's values are on the tape
+            xs = iter([b.op(Op.LOAD, F32, self.buf, i) for i in self._slot(k, size, offset, b)])
+            loaded = [_unpack(xs, v.type, b) for v in used]
+            _replace(sweep, dict(zip(used, loaded)))
+            block.instrs = [*block.instrs[:start], *b.block.instrs, *sweep]
+            return
         cond = b.op(Op.LT, BOOL, k, b.const(self.cap, I32))
         then, other = Block(), Block()
         tb = Builder(then, loop.loc)
@@ -117,13 +137,29 @@ class Checkpoints:
         _replace(sweep, dict(zip(used, choice.results)))
         block.instrs = [*block.instrs[:start], *b.block.instrs, *sweep]
 
+    def guard(self, loop: Instr, trips: Value, b: Builder) -> Value | None:
+        """With ``covers``, for taped loop ``loop`` that ran ``trips`` iterations: store an
+        overflow (more than C) in the row's overflow word; return the condition under which
+        its adjoint may run (at most C iterations).  None: no guard needed."""
+        if not self.covers or id(loop) not in self.loops:
+            return None
+        over = b.op(Op.GT, BOOL, trips, b.const(self.cap, I32))
+        then, other = Block(), Block()
+        tb = Builder(then, loop.loc)
+        tb.emit(Op.STORE, [self.buf, self.row, tb.op(Op.BITCAST, F32, trips)], [])
+        tb.yield_()
+        Builder(other, loop.loc).yield_()
+        b.emit(Op.IF, [over], [], regions=[then, other])
+        return b.op(Op.NOT, BOOL, over)
+
     def add_params(self, fn: Function) -> list[dict]:
         """Give ``fn`` the tape's arguments, if it has a tape; their ABI entries."""
         if not self.size:
             return []
         fn.params += [Param(self.buf, uniform=True), Param(self.row)]
         return [{"name": TAPE, "type": type_to_json(self.buf.type), "uniform": True,
-                 "default": None, "leaves": [TAPE], "tape_floats": self.size},
+                 "default": None, "leaves": [TAPE], "tape_floats": self.size,
+                 "tape_covers": self.covers},
                 {"name": TAPE_ROW, "type": {"kind": "scalar", "dtype": "i32"},
                  "uniform": False, "default": None, "leaves": [TAPE_ROW]}]
 

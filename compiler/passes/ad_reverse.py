@@ -76,13 +76,15 @@ _NO_DERIVATIVE = {Op.FLOOR, Op.CEIL, Op.CAST, Op.BITCAST, Op.CONST, Op.LOAD, Op.
 class AdReverse(Pass):
     name = "ad_reverse"
 
-    def __init__(self, tape: int = 0, seeds: tuple[int | str, ...] | None = None) -> None:
+    def __init__(self, tape: int = 0, seeds: tuple[int | str, ...] | None = None,
+                 covers: bool = False) -> None:
         self.tape = tape  # iterations checkpointed per loop (0: recompute from the start)
         self.seeds = seeds  # the loads differentiated (None: every one; see _Reverse)
+        self.covers = covers  # no code for iterations beyond the tape (ad_checkpoint.py)
 
     def run(self, module: Module) -> None:
         for fn in module.functions.values():
-            _Reverse(fn, self.tape, self.seeds).run()
+            _Reverse(fn, self.tape, self.seeds, self.covers).run()
 
 
 class _Reverse:
@@ -92,10 +94,10 @@ class _Reverse:
     for: no adjoint code for the others)."""
 
     def __init__(self, fn: Function, cap: int = 0,
-                 seeds: tuple[int | str, ...] | None = None) -> None:
+                 seeds: tuple[int | str, ...] | None = None, covers: bool = False) -> None:
         self.fn = fn
         self.seeds = None if seeds is None else frozenset(seeds)
-        self.tape = Checkpoints(cap)  # the loops' carried state (cap 0: none)
+        self.tape = Checkpoints(cap, covers)  # the loops' carried state (cap 0: none)
         # a differentiated buffer (PRM, T) -> its gradient buffer and row
         self.bufs: dict[Value, tuple[Value, Value]] = {
             p.value: (Value(BufferType(F32), DIFFERENTIATED[p.value.name][0]),
@@ -418,12 +420,20 @@ class _Reverse:
                   *[rb.op(Op.ADD, F32, s, local[v]) for s, v in zip(sums, free)])
         zero = b.const(0.0, F32)
         first = b.op(Op.SUB, I32, trips, b.const(1, I32))
-        new = b.emit(Op.LOOP, [first, *[seeds.get(i) or zero for i in hot],
-                               *[zero] * len(free)],
-                     [I32, *[F32] * (len(hot) + len(free))], regions=[ab])
+        operands = [first, *[seeds.get(i) or zero for i in hot], *[zero] * len(free)]
+        types = [I32, *[F32] * (len(hot) + len(free))]
+        ok = self.tape.guard(ins, trips, b)  # covers: a lane that overflowed skips it
+        if ok is None:
+            res = b.emit(Op.LOOP, operands, types, regions=[ab]).results[1:]
+        else:
+            then, other = Block(), Block()
+            tb = Builder(then, ins.loc)
+            tb.yield_(*tb.emit(Op.LOOP, operands, types, regions=[ab]).results[1:])
+            ob = Builder(other, ins.loc)
+            ob.yield_(*[ob.const(0.0, F32)] * (len(types) - 1))
+            res = b.emit(Op.IF, [ok], types[1:], regions=[then, other]).results
         # a taped loop: iteration k < C loads what its sweep reads instead of running fwd
         self.tape.keep(ins, ab, fwd, k, {c: o for o, c in m.items()})
-        res = new.results[1:]
         for i, r in zip(hot, res):
             self.acc(adj, init[i], r, b)
         back = {v: k for k, v in self.sub.items()}  # exported results -> their values
@@ -436,6 +446,8 @@ class _Reverse:
         c = min(k, cap - 1) (0 times for k < cap)."""
         body, init, count = ins.regions[0], [self.P(v) for v in ins.operands], k
         init, count = self.tape.load(ins, k, b) or (init, count)
+        if count is None:  # covers: the state of iteration k is on the tape
+            return init
         types = [a.type for a in body.args]
         then, other = Block(), Block()
         tb = Builder(then, ins.loc)

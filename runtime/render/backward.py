@@ -31,7 +31,7 @@ import numpy as np
 
 from ...compiler.build import elimination_threshold
 from ...compiler.diagnostics import CompileError
-from ...compiler.passes.ad_checkpoint import TAPE_LANES
+from ...compiler.passes.ad_checkpoint import OVERFLOW, TAPE_LANES
 from ...core.scene_spec import Slot
 from ..scene.samplers import sample_count
 from .differentiable import Texels, _lookup, ad_twin, adjoint_seeds
@@ -106,8 +106,9 @@ def backward(scene: Scene, d_img: Any, params: list[str], spp: int | None = None
     seed = scene.seed if seed is None else int(seed)
     scene.use_generic()
     D = _pixel_adjoints(scene, d, spp, seed, threads)
+    covers = tape_covers(scene, tape)
     twin = ad_twin(scene, "reverse", elimination_threshold("reverse", eliminate), tape,
-                   adjoint_seeds(chosen))
+                   adjoint_seeds(chosen), covers)
     # as a render: the quick tier for a small pass not cached yet, the full one built in
     # the background from the second such pass and used once ready (renderer.py's _tiered)
     mod = twin._tiered(twin.compile(quick=twin.quick_fits(spp)))
@@ -126,6 +127,10 @@ def backward(scene: Scene, d_img: Any, params: list[str], spp: int | None = None
     floats = next((p.get("tape_floats", 0) for p in kernel["params"]
                    if p["name"] == "ad_tape"), 0)
     tape_rows = np.zeros(max(1, parts.parts * LANES * floats), np.float32)  # per lane
+    overflow = tape_rows.view(np.int32)[:parts.parts * LANES * floats].reshape(
+        parts.parts, -1, LANES)[:, OVERFLOW] if covers else None
+    if overflow is not None:
+        overflow[:] = -1  # a lane whose bounce loop outran the tape writes its count
     buffers = dict(zip(SCENE_BUFFERS, scene.buffers.args()))
     uniform = buffers | {"D": D, "PRM": prm, "gPRM": parts.gPRM, "gT": parts.gT,
                          "ad_tape": tape_rows}
@@ -141,7 +146,26 @@ def backward(scene: Scene, d_img: Any, params: list[str], spp: int | None = None
         args = [(varying[x], True) if x in varying else (uniform[x], False)
                 if x in uniform else (_seed(x, ones[:n]), True) for x in names]
         parts.run(partial(_adjoint_part, mod["render_sample_loss"], args), n)
+    if overflow is not None and (overflow != -1).any():  # the tape did not cover: again,
+        scene._tape_overflowed = True  # with a kernel that replays (and from now on)
+        return backward(scene, d_img, params, spp, seed, threads, eliminate, tape)
     return {name: parts.gradient(c) for name, c in chosen.items()}
+
+
+def tape_covers(scene: Scene, tape: int) -> bool:
+    """Whether the adjoint kernel may leave out the iterations beyond the tape
+    (``Build.tape_covers``): the integrator's ``max_depth`` keeps its bounce loop under
+    ``tape`` iterations, and no pass of this scene outran such a tape before.  (A lane that
+    outruns it anyway, in a loop ``max_depth`` does not bound, is caught: ``backward`` runs
+    again without.)"""
+    if tape <= 0 or getattr(scene, "_tape_overflowed", False):
+        return False
+    slots = scene.params.slots
+    for inst in scene.scene_spec_for_params().integrators:
+        key = f"{inst.name or inst.plugin}.max_depth"
+        if key in slots:
+            return 0 <= int(scene.params[key][0]) < tape
+    return False
 
 
 def _seed(name: str, ones: np.ndarray) -> np.ndarray:

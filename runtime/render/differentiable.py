@@ -44,6 +44,7 @@ from ...compiler.passes.specialize import parameter_slots
 from ...core.color import ColorModel
 from ...core.scene_spec import Instance, SceneSpec, Slot
 from ..plugins import INTERNAL
+from .prebuild import speculate
 
 if TYPE_CHECKING:
     from .renderer import Scene
@@ -121,6 +122,7 @@ class SceneParams(MutableMapping):
         self.slots = param_slots(generic)
         self.texels = texel_params(scene.buffers.textures, scene.build.model)
         self.slots.update(self.texels)  # for _lookup's names; read and set below
+        self.assigned: list[str] = []  # the names assigned, first first (prebuild.py)
 
     def __getitem__(self, name: str) -> np.ndarray:
         key, slot = _lookup(self.slots, name)
@@ -135,6 +137,7 @@ class SceneParams(MutableMapping):
         key, slot = _lookup(self.slots, name)
         if key in self.texels:
             self._set_texels(name, self.texels[key], value)
+            self._assigned(name)
             return
         v = np.asarray(value, np.float32).reshape(-1)
         if v.size not in (1, slot.size):
@@ -143,8 +146,15 @@ class SceneParams(MutableMapping):
             raise ValueError(f"`{name}` holds {slot.size} value(s){hint}; got an array of "
                              f"{v.size}")
         self.scene.use_generic()
+        self._assigned(name)  # before the generic kernels compile: the two overlap
         _check_tables(self.scene, name)
         self.scene.prm[slot.offset:slot.offset + slot.size] = v
+
+    def _assigned(self, name: str) -> None:
+        """Remember ``name``; a new one starts the adjoint kernel's build (prebuild.py)."""
+        if name not in self.assigned:
+            self.assigned.append(name)
+            speculate(self.scene, self.assigned)
 
     def _set_texels(self, name: str, texels: Texels, value: Any) -> None:
         v = np.asarray(value, np.float32)
@@ -192,24 +202,27 @@ def _check_tables(scene: Scene, name: str) -> None:
 
 
 def ad_twin(scene: Scene, ad: str, eliminate: int = 0, tape: int = 0,
-            seeds: tuple[int | str, ...] | None = None) -> Scene:
+            seeds: tuple[int | str, ...] | None = None, covers: bool = False) -> Scene:
     """The scene's twin for differentiation mode ``ad``: same description and buffers, a
     generic build with tangents ("forward": its film also takes the derivative of the
     radiance) or adjoints ("reverse": runtime/render/backward.py; ``eliminate``: the
     threshold of graph elimination, 0 for none; ``tape``: bounces checkpointed per lane,
     0 to recompute them all; ``seeds``: the parameters differentiated, None for all, see
-    :func:`adjoint_seeds`)."""
+    :func:`adjoint_seeds`; ``covers``: no code for iterations beyond the tape,
+    ``Build.tape_covers``)."""
     attr = f"_{ad}" + (f"_e{eliminate}" if eliminate else "") + (f"_t{tape}" if tape else "") \
-        + (f"_s{hash(seeds)}" if seeds is not None else "")
+        + (f"_s{hash(seeds)}" if seeds is not None else "") + ("_c" if covers else "")
     twin = getattr(scene, attr, None)
     if twin is None or twin.desc is not scene.desc:
         from .renderer import Scene as SceneClass
 
         twin = SceneClass.__new__(SceneClass)
         twin.__dict__.update(scene.__dict__)
-        twin.build = Build(scene.build.target, scene.build.model, ad, eliminate, tape, seeds)
+        twin.build = Build(scene.build.target, scene.build.model, ad, eliminate, tape, seeds,
+                           covers)
         twin.specialize, twin.derivative, twin._prm_set = False, ad == "forward", True
         twin._tier_up = None  # the scene's own background build, not the twin's
+        twin._speculating = twin._speculated = None  # likewise (prebuild.py)
         twin._reset_kernels()
         twin._forward = twin._reverse = None
         setattr(scene, attr, twin)

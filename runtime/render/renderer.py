@@ -44,6 +44,7 @@ from .film import (COLOUR_CHANNELS, colour_image, develop, film_format, film_uni
                    new_accumulator)
 from .flatten import SceneBuffers, flatten
 from .integrators import integrator_instances, integrator_plan
+from .prebuild import wait_for_speculated
 from .kernel_source import film_channels, kernel_source, scene_plugins
 from .progress import Progress
 from .shapes import FLAGS as SHAPE_FLAGS
@@ -188,6 +189,7 @@ class Scene:
         if self._module is not None and not again and (quick or not loaded_quick):
             return self._module
         src, kw = self._jit_inputs = self._jit_args()
+        wait_for_speculated(self, quick)  # a background build of these kernels (prebuild.py)
         try:
             mod = jit(src, quick=quick and not jit_cached(src, **kw), **kw)
         except NoRayTracer:  # one line: what is missing, not the integrator's source

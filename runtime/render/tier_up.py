@@ -35,11 +35,12 @@ RENDERS_BEFORE_TIER_UP = 2
 
 
 class TierUp:
-    """One background build of a scene's full-tier kernels: ``jit(source, **options)``."""
+    """One background build of a scene's full-tier kernels: ``jit(source, **options)``
+    (``quick``: of its quick tier; runtime/render/prebuild.py's adjoint kernels)."""
 
-    def __init__(self, source: str, options: dict[str, Any]) -> None:
-        self.source, self.options = source, options
-        job = pickle.dumps((source, options))  # first: a scene that cannot be sent starts none
+    def __init__(self, source: str, options: dict[str, Any], quick: bool = False) -> None:
+        self.source, self.options, self.quick = source, options, quick
+        job = pickle.dumps((source, options, quick))  # a scene that cannot be sent starts none
         # its messages go to a file: a pipe could fill up, or break when this process ends
         self.messages = tempfile.TemporaryFile()
         self.proc = subprocess.Popen(
@@ -71,7 +72,13 @@ class TierUp:
                           f"({self.failure}); rendering goes on with the quick tier",
                           stacklevel=3)
             return None
-        return jit(self.source, quick=False, **self.options)  # a cache hit
+        return jit(self.source, quick=self.quick, **self.options)  # a cache hit
+
+    def finish(self) -> bool:
+        """Wait for the build to end; whether it succeeded (its kernels are in the cache)."""
+        self.proc.wait()
+        self.messages.close()
+        return self.proc.returncode == 0
 
     def stop(self) -> None:
         """End the build now (its partial cache entry is removed)."""
@@ -85,14 +92,14 @@ class TierUp:
 
 
 def _worker() -> int:
-    """The background process: read ``(source, options)``, build the full tier into the
+    """The background process: read ``(source, options, quick)``, build that tier into the
     kernel cache.  SIGTERM raises SystemExit, so jit's cleanup removes a partial entry."""
     signal.signal(signal.SIGTERM, lambda *_: sys.exit(143))
-    source, options = pickle.load(sys.stdin.buffer)
+    source, options, quick = pickle.load(sys.stdin.buffer)
     from ..api import jit
 
     try:
-        jit(source, quick=False, **options)
+        jit(source, quick=quick, **options)
     except Exception as e:  # one line for the warning: what failed, where
         lines = str(e).strip().splitlines()
         print(f"{type(e).__name__}: {lines[0] if lines else ''}", file=sys.stderr)
