@@ -6,11 +6,14 @@ first pixel, per scene and as geometric means.
                               [--threads 2] [--ttfp] [--json out/scene_set/run.json]
 
 For each scene both renderers render at --spp, taking turns run by run (median of --repeat
-after a warm-up; bench/render_vs_mitsuba.py's ``interleaved_medians``), and each image's RMSE
-is taken against a reference: Mitsuba 3 at --ref-spp (cached under out/scene_set/ref/).  The
-equal-error ratio (t_rdsl * RMSE_rdsl^2) / (t_mitsuba * RMSE_mitsuba^2) is the ratio of times
-to reach the same error if RMSE ~ 1/sqrt(time); below 1 rdsl is faster, and a bias of rdsl
-against Mitsuba shows up as a high one.  Mitsuba runs `llvm_ad_rgb` (libLLVM 19:
+after a warm-up; bench/render_vs_mitsuba.py's ``interleaved_medians``), and the RMSE against
+a reference (Mitsuba 3 at --ref-spp, cached under out/scene_set/ref/) is that of the images
+of all --repeat + 1 runs, seeds 0 .. --repeat (the root of their mean squared error: one
+image's error swings with its fireflies; on veach at 64 spp the MSE of 8 seeds spans 10x,
+for either renderer).  The equal-error ratio (t_rdsl * RMSE_rdsl^2) /
+(t_mitsuba * RMSE_mitsuba^2) is the ratio of times to reach the same error if
+RMSE ~ 1/sqrt(time); below 1 rdsl is faster, and a bias of rdsl against Mitsuba shows up as
+a high one.  Mitsuba runs `llvm_ad_rgb` (libLLVM 19:
 DRJIT_LIBLLVM_PATH), else `scalar_rgb`; the table says which.
 
 --ttfp: the time to first pixel of a new scene, cold: the whole ``rdsl render --spp 1``
@@ -101,10 +104,12 @@ def measure(name: str, path: Path, args: argparse.Namespace) -> dict:
     fns = {"rdsl": lambda seed: s.render(spp=args.spp, seed=seed, threads=args.threads),
            "mitsuba": lambda seed: mi_fn(args.spp, seed)}
     runs: dict[str, list[float]] = {}
-    res = interleaved_medians(fns, args.repeat, runs)
-    (tr, cr, ir), (tm, cm, im) = res["rdsl"], res["mitsuba"]
+    images: dict[str, list[np.ndarray]] = {}
+    res = interleaved_medians(fns, args.repeat, runs, images)
+    (tr, cr, _), (tm, cm, _) = res["rdsl"], res["mitsuba"]
     pairs = [a / b for a, b in zip(runs["rdsl"], runs["mitsuba"])]
-    er, em = rmse(ir, ref), rmse(im, ref)
+    er, em = (math.sqrt(statistics.fmean(rmse(i, ref) ** 2 for i in images[who]))
+              for who in ("rdsl", "mitsuba"))
     return {"scene": name, "rdsl_s": tr, "mitsuba_s": tm, "rdsl_rmse": er, "mitsuba_rmse": em,
             "time_ratio": tr / tm, "equal_error": tr * er * er / (tm * em * em),
             "cpu_ratio": cr / cm, "pair_min": min(pairs), "pair_max": max(pairs),

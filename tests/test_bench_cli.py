@@ -121,3 +121,27 @@ def test_a_plot_without_matplotlib_is_one_clear_line(tmp_path: Path) -> None:
     assert "-o needs matplotlib, which is not installed" in r.stderr
     assert len(r.stderr.strip().splitlines()) == 1, r.stderr
     assert not (tmp_path / "plot.png").exists()
+
+
+def test_interleaved_medians_keeps_every_image_in_seed_order() -> None:
+    # bench/scene_set.py takes the RMSE over all of them (one image's error swings with its
+    # fireflies); the renderers take turns, each called with seeds 0 (warm-up) .. repeat
+    import numpy as np
+
+    from rdsl.runtime.render.bench import interleaved_medians
+
+    calls: list[tuple[str, int]] = []
+
+    def renderer(name: str):
+        def render(seed: int) -> np.ndarray:
+            calls.append((name, seed))
+            return np.full((2, 2, 3), seed, np.float32)
+        return render
+
+    runs: dict = {}
+    images: dict = {}
+    res = interleaved_medians({"a": renderer("a"), "b": renderer("b")}, 3, runs, images)
+    assert calls == [("a", 0), ("b", 0), ("a", 1), ("b", 1), ("a", 2), ("b", 2),
+                     ("a", 3), ("b", 3)]
+    assert [float(i[0, 0, 0]) for i in images["a"]] == [0.0, 1.0, 2.0, 3.0]
+    assert len(runs["b"]) == 3 and float(res["b"][2][0, 0, 0]) == 3.0

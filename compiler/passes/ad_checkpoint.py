@@ -154,7 +154,7 @@ class Checkpoints:
 
     def add_params(self, fn: Function) -> list[dict]:
         """Give ``fn`` the tape's arguments, if it has a tape; their ABI entries."""
-        if not self.size:
+        if not self.loops:  # no loop taped (a covering tape's overflow word alone is none)
             return []
         fn.params += [Param(self.buf, uniform=True), Param(self.row)]
         return [{"name": TAPE, "type": type_to_json(self.buf.type), "uniform": True,

@@ -128,7 +128,7 @@ def backward(scene: Scene, d_img: Any, params: list[str], spp: int | None = None
                    if p["name"] == "ad_tape"), 0)
     tape_rows = np.zeros(max(1, parts.parts * LANES * floats), np.float32)  # per lane
     overflow = tape_rows.view(np.int32)[:parts.parts * LANES * floats].reshape(
-        parts.parts, -1, LANES)[:, OVERFLOW] if covers else None
+        parts.parts, -1, LANES)[:, OVERFLOW] if covers and floats else None
     if overflow is not None:
         overflow[:] = -1  # a lane whose bounce loop outran the tape writes its count
     buffers = dict(zip(SCENE_BUFFERS, scene.buffers.args()))

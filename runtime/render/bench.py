@@ -39,14 +39,17 @@ def rmse(a: np.ndarray, b: np.ndarray) -> float:
 
 
 def interleaved_medians(fns: dict[str, Callable[[int], np.ndarray]], repeat: int,
-                        runs: dict[str, list[float]] | None = None
+                        runs: dict[str, list[float]] | None = None,
+                        images: dict[str, list[np.ndarray]] | None = None
                         ) -> dict[str, tuple[float, float, np.ndarray]]:
     """Median wall seconds, median CPU seconds (all the process's threads) and the last image
     of each renderer in ``fns``, after a warm-up (compilation, caches, page faults).  The
     renderers take turns, one run each per repeat, so a change in the machine's load (it is
     shared) hits them alike; CPU seconds hardly change with the load at all.  ``runs``, if
-    given, receives each renderer's wall seconds run by run."""
+    given, receives each renderer's wall seconds run by run; ``images`` every image (the
+    warm-up's first: seeds 0 .. ``repeat``)."""
     imgs = {name: fn(0) for name, fn in fns.items()}
+    every: dict[str, list[np.ndarray]] = {name: [img] for name, img in imgs.items()}
     times: dict[str, list[float]] = {name: [] for name in fns}
     cpus: dict[str, list[float]] = {name: [] for name in fns}
     for k in range(repeat):
@@ -55,8 +58,11 @@ def interleaved_medians(fns: dict[str, Callable[[int], np.ndarray]], repeat: int
             imgs[name] = fn(k + 1)
             times[name].append(time.perf_counter() - t)
             cpus[name].append(time.process_time() - c)
+            every[name].append(imgs[name])
     if runs is not None:
         runs.update(times)
+    if images is not None:
+        images.update(every)
     return {name: (statistics.median(times[name]), statistics.median(cpus[name]), imgs[name])
             for name in fns}
 
