@@ -44,8 +44,8 @@ from .film import (COLOUR_CHANNELS, colour_image, develop, film_format, film_uni
                    new_accumulator)
 from .flatten import SceneBuffers, flatten
 from .integrators import integrator_instances, integrator_plan
-from .prebuild import wait_for_speculated
 from .kernel_source import film_channels, kernel_source, scene_plugins
+from .prebuild import wait_for_speculated
 from .progress import Progress
 from .shapes import FLAGS as SHAPE_FLAGS
 from .shapes import INSTANCED, INSTANCED_KIND
