@@ -77,6 +77,20 @@ def test_a_new_name_replaces_the_job(cache: Path) -> None:
         job.stop()
 
 
+def test_integer_settings_of_the_integrator_are_not_speculated_on(cache: Path) -> None:
+    # backward refuses them (no derivative), so a kernel for them would never be asked for
+    scene = _scene()
+    scene.params["path.max_depth"] = 2
+    assert getattr(scene, "_speculating", None) is None
+    scene.params[RED] = 0.5
+    twin, job = scene._speculating
+    try:
+        assert twin is ad_twin(scene, "reverse", 0, TAPE, seeds_of(scene, [RED]),
+                               tape_covers(scene, TAPE))
+    finally:
+        job.stop()
+
+
 def test_no_speculation_when_off_or_on_one_core(cache: Path,
                                                 monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.setenv(prebuild.PREBUILD_ENV, "0")

@@ -49,6 +49,10 @@ def speculate(scene: Scene, names: list[str]) -> None:
     from .differentiable import ad_twin, seeds_of
     from .tier_up import TierUp
 
+    integrators = {i.name or i.plugin for i in scene.scene_spec_for_params().integrators}
+    names = [n for n in names if n.split(".")[0] not in integrators]  # backward refuses them
+    if not names:
+        return
     old = getattr(scene, "_speculating", None)
     try:
         twin = ad_twin(scene, "reverse", 0, TAPE, seeds_of(scene, names),
