@@ -108,7 +108,8 @@ class Module:
 
     def bind_scene(self, scene: Any) -> None:
         """Point the library's ray queries (`trace`, `occluded`) at an Embree scene (an
-        :class:`rdsl.runtime.embree.EmbreeScene`); kept alive as long as this module."""
+        :class:`rdsl.runtime.embree.EmbreeScene`); kept alive as long as this module or one of
+        its kernels is."""
         try:
             slot = ctypes.c_void_p.in_dll(self._lib, "rdsl_embree_scene")
         except ValueError:
