@@ -34,7 +34,7 @@ from ...compiler.diagnostics import CompileError
 from ...compiler.passes.ad_checkpoint import OVERFLOW, TAPE_LANES
 from ...core.scene_spec import Slot
 from ..scene.samplers import sample_count
-from .differentiable import Texels, _lookup, ad_twin, adjoint_seeds
+from .differentiable import Texels, _lookup, ad_twin, adjoint_seeds, integrator_names
 from .film import film_reach, film_uniforms
 from .kernel_source import SCENE_BUFFERS
 
@@ -49,7 +49,7 @@ def _check(scene: Scene, d_img: Any, params: list[str]) -> tuple[np.ndarray, dic
     if isinstance(params, str):
         params = [params]
     slots = scene.params.slots
-    integrators = {i.name or i.plugin for i in scene.scene_spec_for_params().integrators}
+    integrators = set(integrator_names(scene))
     chosen = {}
     for name in params:
         key, slot = _lookup(slots, name)
@@ -161,8 +161,8 @@ def tape_covers(scene: Scene, tape: int) -> bool:
     if tape <= 0 or getattr(scene, "_tape_overflowed", False):
         return False
     slots = scene.params.slots
-    for inst in scene.scene_spec_for_params().integrators:
-        key = f"{inst.name or inst.plugin}.max_depth"
+    for name in integrator_names(scene):
+        key = f"{name}.max_depth"
         if key in slots:
             return 0 <= int(scene.params[key][0]) < tape
     return False

@@ -44,6 +44,7 @@ from ...compiler.passes.specialize import parameter_slots
 from ...core.color import ColorModel
 from ...core.scene_spec import Instance, SceneSpec, Slot
 from ..plugins import INTERNAL
+from .integrators import integrator_instances
 from .prebuild import speculate
 
 if TYPE_CHECKING:
@@ -100,6 +101,12 @@ def texel_params(textures: list[Instance], model: ColorModel) -> dict[str, Texel
         copies, _ = out.setdefault(f"{t.name}.data", ([], (p["height"], p["width"], 3)))
         copies.append((3 * p["offset"], float(p.get("scale", 1.0))))
     return {k: Texels(tuple(c), s) for k, (c, s) in out.items()}
+
+
+def integrator_names(scene: Scene) -> list[str]:
+    """What ``scene.params`` names the scene's integrators by (``path`` in
+    ``path.max_depth``): their integer settings, which have no derivative."""
+    return [i.name or i.plugin for i in integrator_instances(scene.desc.integrator)]
 
 
 def _lookup(slots: dict[str, Slot], name: str) -> tuple[str, Slot]:

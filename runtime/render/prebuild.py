@@ -46,10 +46,10 @@ def speculate(scene: Scene, names: list[str]) -> None:
         return
     from ..api import jit_cached, quick_everywhere
     from .backward import TAPE, tape_covers
-    from .differentiable import ad_twin, seeds_of
+    from .differentiable import ad_twin, integrator_names, seeds_of
     from .tier_up import TierUp
 
-    integrators = {i.name or i.plugin for i in scene.scene_spec_for_params().integrators}
+    integrators = set(integrator_names(scene))
     names = [n for n in names if n.split(".")[0] not in integrators]  # backward refuses them
     if not names:
         return
