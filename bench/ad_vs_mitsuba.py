@@ -1,7 +1,8 @@
 """Inverse rendering, rdsl against Mitsuba 3 ``prb``: recover the Cornell box's red-wall albedo
 with the same spp, iteration count, start, optimizer (Adam, same rate) and loss (the mean
-squared error against a target the renderer itself rendered at 8x the spp), alternating the
-two renderers on one machine, each in a process of its own (for its peak RSS).
+squared error against a target the renderer itself rendered at 8x the spp; the gradient from
+other samples than the image's, as Mitsuba does), alternating the two renderers on one
+machine, each in a process of its own (for its peak RSS).
 
     python bench/ad_vs_mitsuba.py [--res 128] [--spp 16] [--max-depth 8] [--iterations 20]
                                   [--rounds 2] [--cold] [--eliminate]
@@ -37,6 +38,11 @@ ROOT = Path(__file__).resolve().parents[1]
 CBOX = ROOT / "examples" / "cbox" / "cbox.xml"
 KEY = "red.reflectance.value"
 LIBLLVM = "/usr/lib/x86_64-linux-gnu/libLLVM.so.19.1"
+# the gradient's samples are not the image's (as Mitsuba's `seed_grad`, which mi.render
+# derives from `seed` and refuses to equal it): with the same samples, the gradient of
+# the squared error would be biased by the covariance of the image's noise and the
+# gradient's
+GRAD_SEED = 1 << 20
 
 
 def run_rdsl(args) -> dict:
@@ -54,7 +60,7 @@ def run_rdsl(args) -> dict:
         img = scene.render(seed=it)
         diff = img - target
         losses.append(float(np.mean(diff * diff)))
-        grads = scene.backward(2.0 * diff / diff.size, [KEY], seed=it,
+        grads = scene.backward(2.0 * diff / diff.size, [KEY], seed=GRAD_SEED + it,
                                eliminate=args.eliminate)
         opt.step(grads)
         opt.clamp(KEY, 0.0, 1.0)

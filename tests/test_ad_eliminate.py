@@ -185,6 +185,7 @@ def _bounce_tapes(scene):
     from rdsl.compiler.passes.specialize import parameter_slots
 
     scene.use_generic()
+    scene._kernel_inputs()  # the generic build's source and scene, without compiling it
     spec = parameter_slots(scene.scene_spec, scene.build.model)[0]
     tapes = [_tape(scene.kernel_src, t, "render_sample", spec, scene.search_paths)[1]
              for t in (0, 10)]

@@ -188,9 +188,10 @@ def test_cbox_backward_in_mono_matches_forward_mode():
 
 
 @needs_cbox
-def test_backward_reuses_a_render_s_pixel_weights_only_for_its_own_samples():
+def test_backward_reuses_a_render_s_pixel_weights_only_for_its_own_samples(monkeypatch):
     # backward divides by each pixel's total film weight: the last render's when it had the
-    # same spp and seed, else a render's now; both give the same gradient, bit for bit
+    # same spp and seed, else the film-weight kernels' (no render); both give the same
+    # gradient, bit for bit
     scene = rdsl.load_scene(CBOX, res=8, max_depth=3)
     scene.params[NAMES[0]] = scene.params[NAMES[0]]  # the generic build, which keeps them
     d = np.random.default_rng(4).standard_normal((8, 8, 3))
@@ -198,11 +199,45 @@ def test_backward_reuses_a_render_s_pixel_weights_only_for_its_own_samples():
     assert scene.film_weights[0] == (4, 3)
     kept = scene.backward(d, params=NAMES, spp=4, seed=3)
     scene.render(spp=2, seed=8)
-    fresh = scene.backward(d, params=NAMES, spp=4, seed=3)
+    with monkeypatch.context() as m:
+        m.setattr(type(scene), "render", lambda *a, **k: pytest.fail("backward rendered"))
+        fresh = scene.backward(d, params=NAMES, spp=4, seed=3)
     assert scene.film_weights[0] == (4, 3)
     for name in NAMES:
         assert np.any(kept[name] != 0)
         np.testing.assert_array_equal(kept[name], fresh[name], err_msg=name)
+
+
+FILM_CASES = {  # a sampler, a filter and a film layout per case, a variant
+    "spectral_multijitter_box_crop": ("spectral", "multijitter", '<rfilter type="box"/>'
+                                      '<integer name="crop_offset_x" value="2"/>'
+                                      '<integer name="crop_width" value="5"/>'),
+    "stratified_tent_border": ("rgb", "stratified", '<rfilter type="tent"/>'
+                               '<boolean name="sample_border" value="true"/>'),
+    "ldsampler_lanczos": ("mono", "ldsampler", '<rfilter type="lanczos"/>'),
+}
+
+
+@needs_cbox
+@pytest.mark.parametrize("case", FILM_CASES)
+def test_film_weight_kernels_sum_a_render_s_pixel_weights(tmp_path, case):
+    # the adjoint module's film-weight kernels take each sample's position as the render
+    # kernel does, for every sampler, filter and film layout: the same totals, bit for bit
+    from rdsl.runtime.render.backward import _film_weights
+    from rdsl.runtime.render.differentiable import ad_twin
+
+    variant, sampler, film = FILM_CASES[case]
+    text = CBOX.read_text().replace('<rfilter type="gaussian"/>', film)
+    text = text.replace('<sampler type="independent">', f'<sampler type="{sampler}">')
+    (tmp_path / "cbox.xml").write_text(text)
+    scene = rdsl.load_scene(tmp_path / "cbox.xml", res=8, max_depth=2, variant=variant)
+    scene.params[NAMES[1]] = scene.params[NAMES[1]]
+    scene.render(spp=4, seed=6)
+    twin = ad_twin(scene, "reverse")
+    got = _film_weights(scene, twin.compile(), 4, 6, threads=2)
+    assert scene.film_weights[0] == (4, 6)
+    assert np.all(scene.film_weights[1] > 0)
+    np.testing.assert_array_equal(got, scene.film_weights[1])
 
 
 @needs_cbox

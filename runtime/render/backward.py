@@ -5,9 +5,10 @@ d loss / d image (``d_img``, shaped like ``render()``'s colour channels), by one
 render: the generic kernel built with ``ad="reverse"`` (compiler/passes/ad_reverse.py).
 Per batch of samples:
 
-1. the plain generic kernel gives each sample's film weights, and so each pixel's total
-   weight (the film divides by it: a pixel is sum w v / sum w), or those the last
-   ``render()`` of the same samples kept (in the generic build);
+1. each pixel's total film weight (the film divides by it: a pixel is sum w v / sum w):
+   that the last ``render()`` of the same samples kept (in the generic build), or else
+   the sum of the samples' weights from their positions alone, by two small kernels of the
+   adjoint module (no path traced);
 2. each sample's adjoint is then sum over the pixels it reaches of w * d_img / total
    weight, computed here (it only moves numbers between the image and the samples);
 3. the adjoint kernel recomputes the sample and sweeps it backwards, adding the gradient of
@@ -71,19 +72,21 @@ def _check(scene: Scene, d_img: Any, params: list[str]) -> tuple[np.ndarray, dic
 LANES = TAPE_LANES  # the widest SIMD packet: lanes of one packet add gradients into rows of
 # their own (array position mod LANES), each part of the adjoint pass into LANES rows (_Parts)
 PARTS_PER_THREAD = 4
+WEIGHT_BATCH = 1 << 16  # samples per batch of the film-weight kernels (10 floats each
+# with a gaussian filter: 2.6 MB)
 TAPE = 16  # bounces whose carried state the adjoint kernel checkpoints per lane (the
 # rest it recomputes from the last checkpoint: compiler/passes/ad_reverse.py)
 
 
-def _pixel_adjoints(scene: Scene, d: np.ndarray, spp: int, seed: int,
+def _pixel_adjoints(scene: Scene, mod: Any, d: np.ndarray, spp: int, seed: int,
                     threads: int | None) -> np.ndarray:
     """``D`` of ``render_sample_loss``: d loss / d pixel over the pixel's total film weight
-    (that of the last ``render()`` of the same samples, or of a render now), over the
-    sample grid grown by the film's reach on each side, zero outside the crop."""
+    (that of the last ``render()`` of the same samples, or the film-weight kernels' of
+    ``mod``, the adjoint module: :func:`_film_weights`), over the sample grid grown by the
+    film's reach on each side, zero outside the crop."""
     kept = getattr(scene, "film_weights", None)
     if not kept or kept[0] != (spp, seed):
-        scene.render(spp=spp, seed=seed, threads=threads)
-        kept = scene.film_weights
+        kept = scene.film_weights = ((spp, seed), _film_weights(scene, mod, spp, seed, threads))
     film = film_uniforms(scene.desc.sensor.film, 1, channels=1)
     h, w, n = film["crop_h"], film["crop_w"], film_reach(film)
     weights = kept[1].reshape(h, w, 1).astype(np.float64)
@@ -91,6 +94,31 @@ def _pixel_adjoints(scene: Scene, d: np.ndarray, spp: int, seed: int,
     y, x = film["crop_y"] - film["grid_y"] + n, film["crop_x"] - film["grid_x"] + n
     pad[y:y + h, x:x + w] = d / np.where(weights == 0, 1.0, weights)
     return pad.reshape(-1)
+
+
+def _film_weights(scene: Scene, mod: Any, spp: int, seed: int,
+                  threads: int | None) -> np.ndarray:
+    """Each pixel's total film weight over the samples of ``spp`` and ``seed``, as a render
+    sums it, from the samples' positions alone (``film_weight_sample`` and
+    ``film_weight_pass``, stdlib/render/adjoint.rdsl.in): no path is traced.  A render
+    leaves out the weights of samples whose radiance is NaN or infinite; this cannot."""
+    film = film_uniforms(scene.desc.sensor.film, 1, channels=0)
+    cells = film["grid_w"] * film["grid_h"]
+    batch = max(1, min(spp, WEIGHT_BATCH // max(cells, 1)))
+    planes = 2 * (2 * film_reach(film) + 1)
+    acc = np.zeros(film["crop_w"] * film["crop_h"], np.float32)
+    pixels = np.arange(acc.size, dtype=np.int32)
+    j = np.arange(cells * batch, dtype=np.int32)
+    block = np.empty(planes * j.size, np.float32)
+    seed_bits = int(np.uint32(seed).view(np.int32))
+    for done in range(0, spp, batch):
+        m = min(batch, spp - done)
+        ns = cells * m
+        S = block[:planes * ns]
+        mod["film_weight_sample"](j[:ns], np.array([done, spp, seed_bits, ns], np.int32), S,
+                                  threads=threads)
+        mod["film_weight_pass"](pixels, np.array([m, ns], np.int32), S, acc, threads=threads)
+    return acc
 
 
 # long: the setup of the adjoint pass, then its batches
@@ -105,7 +133,6 @@ def backward(scene: Scene, d_img: Any, params: list[str], spp: int | None = None
     spp = sample_count(scene.desc.sensor.sampler, int(spp or scene.spp))
     seed = scene.seed if seed is None else int(seed)
     scene.use_generic()
-    D = _pixel_adjoints(scene, d, spp, seed, threads)
     covers = tape_covers(scene, tape)
     twin = ad_twin(scene, "reverse", elimination_threshold("reverse", eliminate), tape,
                    adjoint_seeds(chosen), covers)
@@ -114,6 +141,7 @@ def backward(scene: Scene, d_img: Any, params: list[str], spp: int | None = None
     mod = twin._tiered(twin.compile(quick=twin.quick_fits(spp)))
     if mod.traces_rays:
         mod.bind_scene(scene.embree)
+    D = _pixel_adjoints(scene, mod, d, spp, seed, threads)
     prm = np.array(scene.prm, np.float32)
     twin.prm = prm
     film = film_uniforms(scene.desc.sensor.film, 1, channels=1)

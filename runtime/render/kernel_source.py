@@ -204,6 +204,8 @@ def _film_holes(film: dict[str, Any]) -> dict[str, str]:
         "grid_y": str(film["grid_y"]),
         "reach": str(reach),
         "film_weights": "\n".join(weights),
+        "weight_stores": "\n".join(f"    S[{k} * ns + j] = w{'x' if k < m else 'y'}{k % m};"
+                                   for k in range(2 * m)),
         "weight_fields": ", ".join(f"w{k}: Float" for k in range(2 * m)),
         "weight_values": ", ".join(f"w{k}: wx{k}" if k < m else f"w{k}: wy{k - m}"
                                    for k in range(2 * m)),
@@ -220,9 +222,11 @@ def film_channels(desc: Any, model: ColorModel, derivative: bool = False) -> lis
         [f"d.{c}" for c in base if derivative]
 
 
-def _adjoint_source(film: dict[str, Any], model: ColorModel, value_type: str) -> str:
+def _adjoint_source(film: dict[str, Any], model: ColorModel, value_type: str,
+                    holes: dict[str, str]) -> str:
     """``render_sample_loss`` (stdlib/render/adjoint.rdsl.in) for the scene's film: one
-    line per pixel a sample reaches, adding its weight times D's value there."""
+    line per pixel a sample reaches, adding its weight times D's value there; and the
+    film-weight kernels, which take the render kernel's ``holes`` for the sample position."""
     if model.polarized and not model.mono:
         raise CompileError("reverse-mode gradients of a render are not offered in the "
                            "rgb polarized variants yet")
@@ -235,8 +239,7 @@ def _adjoint_source(film: dict[str, Any], model: ColorModel, value_type: str) ->
             at = c * (dy * row + dx)
             px = ", ".join(f"D[b + {at + k}]" for k in range(c))
             taps.append(f"    a = a + f.w{dx} * f.w{m + dy} * {make}({px});")
-    return fill({"value_type": value_type, "cells": str(film["grid_w"] * film["grid_h"]),
-                 "grid_w": str(film["grid_w"]), "pad_w": str(row),
+    return fill({**holes, "value_type": value_type, "pad_w": str(row),
                  "zero": f"{make}(0.0)", "taps": "\n".join(taps)}, ADJOINT)
 
 
@@ -272,7 +275,7 @@ def kernel_source(desc: Any, bufs: SceneBuffers, bsdfs: list[Instance],
     seed_rng = (["    let (rng, u_wavelength) = next_1d(pcg32_seed(UInt64(seed), stream));",
                  "    let wavelength_weight = sample_wavelengths(u_wavelength);"] if spectral
                 else ["    let rng = pcg32_seed(UInt64(seed), stream);"])
-    src = fill({
+    holes = {
         "scene_name": Path(desc.path).name,
         "imports": "\n".join(_imports(spectral, plugins)),
         "value_type": value_type,
@@ -285,5 +288,6 @@ def kernel_source(desc: Any, bufs: SceneBuffers, bsdfs: list[Instance],
                                    alpha or plan.nested_image is not None),
         "sampler_kind": str(sampler_kind(desc.sensor.sampler)),
         **_film_holes(film),
-    })
-    return src + "\n" + _adjoint_source(film, model, value_type) if adjoint else src
+    }
+    src = fill(holes)
+    return src + "\n" + _adjoint_source(film, model, value_type, holes) if adjoint else src

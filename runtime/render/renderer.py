@@ -208,8 +208,9 @@ class Scene:
         src, scene, filename = self._kernel_inputs()
         kw = {"build": self.build, "scene": scene, "search_paths": self.search_paths,
               "filename": filename}
-        if self.build.ad == "reverse":  # backward runs this kernel's adjoint, and no other
-            kw["exports"] = ["render_sample_loss"]
+        if self.build.ad == "reverse":  # backward runs this kernel's adjoint and the film-weight
+            # kernels (their adjoints differentiate nothing: no parameter reaches them)
+            kw["exports"] = ["render_sample_loss", "film_weight_sample", "film_weight_pass"]
         return src, kw
 
     def _reset_kernels(self) -> None:
