@@ -227,9 +227,6 @@ def _adjoint_source(film: dict[str, Any], model: ColorModel, value_type: str,
     """``render_sample_loss`` (stdlib/render/adjoint.rdsl.in) for the scene's film: one
     line per pixel a sample reaches, adding its weight times D's value there; and the
     film-weight kernels, which take the render kernel's ``holes`` for the sample position."""
-    if model.polarized and not model.mono:
-        raise CompileError("reverse-mode gradients of a render are not offered in the "
-                           "rgb polarized variants yet")
     n = film_reach(film)
     m, c, row = 2 * n + 1, 1 if model.mono else 3, film["grid_w"] + 2 * n
     make = {"Vec3": "Vec3", "Unpolarized": "Unpolarized"}.get(value_type, "Spectrum")
