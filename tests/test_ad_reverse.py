@@ -344,6 +344,9 @@ def test_backward_mistakes_are_clear_errors():
         scene.backward(np.zeros((8, 8, 3)), params=["red.albedo"])
     with pytest.raises(CompileError, match="`path.max_depth` is an integer setting"):
         scene.backward(np.zeros((8, 8, 3)), params=["path.max_depth"])
+    device = rdsl.load_scene(CBOX, res=8, spp=1, target="opencl")
+    with pytest.raises(CompileError, match="CPU targets.*not on `opencl`.*target='host'"):
+        device.backward(np.zeros((8, 8, 3)), params=["red.reflectance.value"])
 
 
 LLVM = Path(os.environ.get("DRJIT_LIBLLVM_PATH", "/usr/lib/x86_64-linux-gnu/libLLVM.so.19.1"))

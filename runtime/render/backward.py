@@ -44,11 +44,20 @@ if TYPE_CHECKING:
 
 __all__ = ["backward"]
 
+CPU_BACKENDS = ("llvm", "c")  # whose kernel calls run their elements in order, one thread
+# per call (the adjoint pass gives each call's lanes gradient rows of their own)
+
 
 def _check(scene: Scene, d_img: Any, params: list[str]) -> tuple[np.ndarray, dict]:
     """``d_img`` as float64 and the slots of ``params``, or a clear error."""
     if isinstance(params, str):
         params = [params]
+    target = scene.build.target
+    if target.backend not in CPU_BACKENDS:
+        raise CompileError(f"scene.backward runs on the CPU targets (host, avx512, avx2, sse4, "
+                           f"scalar, c), not on `{target.name}`: its work-items run at once "
+                           "and would add into the same gradient rows; load the scene with "
+                           "target='host' for gradients")
     slots = scene.params.slots
     integrators = set(integrator_names(scene))
     chosen = {}
