@@ -14,6 +14,7 @@ build raises one clear :class:`OpenCLUnavailable` naming the package to install.
 
 from __future__ import annotations
 
+import threading
 from pathlib import Path
 from typing import Any
 
@@ -159,6 +160,9 @@ class ClKernel(Kernel):
         self._cl = cl
         self._kernel = getattr(program, info["symbol"])
         self._device: dict[int, Any] = {}  # argument slot (or -1: the mask) -> cl.Buffer
+        # one call at a time: calls share the device buffers above and the kernel's
+        # arguments (two threads calling at once crashed in pyopencl)
+        self._calling = threading.Lock()
         self.last_device_seconds = 0.0  # the last call's kernel alone, without copies
 
     def _bind_native(self, lib: Any) -> None:
@@ -191,7 +195,8 @@ class ClKernel(Kernel):
             out_arrays: dict[str, np.ndarray] = {}
         else:
             out_list, out_arrays = self._fresh_outputs(n)
-        self.launch(n, vals, _mask_array(mask) if masked else None, out_list)
+        with self._calling:
+            self.launch(n, vals, _mask_array(mask) if masked else None, out_list)
         result = out if out is not None else self._results(out_arrays, n)
         pending = Pending([], None, lambda: result)
         return pending if not wait else pending.result()

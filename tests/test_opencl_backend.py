@@ -115,6 +115,20 @@ def test_user_kernel_call_interface(width: int):
     assert np.array_equal(_bits(small), _bits(want[:10]))
 
 
+def test_calls_from_threads_at_once():
+    """A kernel called from several threads at once (as the renderer's thread pools do):
+    each call gets its own results (calls share the device buffers, so they take turns)."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    cl_k = rdsl.jit(GGX, target="opencl", width=8)["ggx_eval_sample"]
+    cpu_k = rdsl.jit(GGX, target=REF)["ggx_eval_sample"]
+    inputs = [_ggx_inputs(257 + 64 * k, seed=k) for k in range(8)]
+    with ThreadPoolExecutor(4) as pool:
+        got = list(pool.map(lambda x: cl_k(*x, 0.3), inputs * 3))
+    for x, g in zip(inputs * 3, got):
+        assert np.array_equal(_bits(g), _bits(cpu_k(*x, 0.3)))
+
+
 def test_struct_results():
     """A stdlib plugin kernel with struct arguments and a struct result (diffuse.sample)."""
     cl_m = rdsl.jit(ROOT / "stdlib" / "bsdf" / "diffuse.rdsl", target="opencl")
