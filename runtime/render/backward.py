@@ -151,8 +151,7 @@ def backward(scene: Scene, d_img: Any, params: list[str], spp: int | None = None
     if mod.traces_rays:
         mod.bind_scene(scene.embree)
     D = _pixel_adjoints(scene, mod, d, spp, seed, threads)
-    prm = np.array(scene.prm, np.float32)
-    twin.prm = prm
+    prm = twin.prm = twin.with_tables(np.array(scene.prm, np.float32), mod)
     film = film_uniforms(scene.desc.sensor.film, 1, channels=1)
     cells = film["grid_w"] * film["grid_h"]
     batch = max(1, min(spp, BATCH_SAMPLES // max(cells, 1)))

@@ -237,7 +237,8 @@ def bsdf_instance(plugin: Any, textures: Any = None, prefix: str | None = None) 
         return perturbed_instance(plugin.children[0], textures, twosided=True,
                                   prefix=f"{top}.brdf_0")
     if plugin.type not in COMBINATORS:
-        return leaf_instance(plugin, textures)
+        leaf = leaf_instance(plugin, textures)
+        return replace(leaf, name=top) if prefix else leaf
     tree = _Tree(textures)
     tree.flatten(plugin, 1.0, 1.0, (), False, False)
     terms = [t for t in tree.terms if t.above > 0.0 or t.below > 0.0]

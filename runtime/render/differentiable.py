@@ -173,6 +173,10 @@ class SceneParams(MutableMapping):
         for off, scale in texels.copies:  # in place: every build reads T at run time
             T[off:off + texels.size] = flat / np.float32(scale)
 
+    def __contains__(self, name: object) -> bool:
+        return isinstance(name, str) and (
+            name in self.slots or name.endswith(".value") and name[:-6] in self.slots)
+
     def __delitem__(self, name: str) -> None:
         raise TypeError("scene parameters cannot be deleted")
 
@@ -270,8 +274,8 @@ def render_forward(scene: Scene, name: str, spp: int | None = None, seed: int | 
     if t.size not in (1, slot.size):
         raise ValueError(f"the tangent of `{name}` has {slot.size} value(s); got {t.size}")
     twin = ad_twin(scene, "forward")
-    twin.compile(quick=twin.quick_fits(spp))
-    twin.prm = np.array(scene.prm if scene._prm_set else params.values)
+    mod = twin.compile(quick=twin.quick_fits(spp))
+    twin.prm = twin.with_tables(np.array(scene.prm if scene._prm_set else params.values), mod)
     twin.tangents = np.zeros_like(twin.prm)
     twin.tangents[slot.offset:slot.offset + slot.size] = t
     img = twin.render(spp=spp, seed=seed, threads=threads)

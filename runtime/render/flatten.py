@@ -121,11 +121,16 @@ class _Flattener:
         self.nv = self.nt = 0
         self.tri_meshes: list[tuple[int, Any, Any]] = []  # (first triangle, mesh, BSDF)
 
-    def bsdf_id(self, bsdf: Any) -> int:
+    def bsdf_id(self, bsdf: Any, shape_name: str) -> int:
+        """The index of the BSDF's instance, made at its first shape: one without an id is
+        named as Mitsuba's ``mi.traverse`` names it, ``<shape>.bsdf`` (so two anonymous
+        BSDFs of one type, or the black diffuse of two area lights' shapes, do not take one
+        name)."""
         key = id(bsdf)
         if key not in self.bsdf_ids:
             self.bsdf_ids[key] = len(self.bsdfs)
-            self.bsdfs.append(bsdf_instance(bsdf, self.textures))
+            self.bsdfs.append(bsdf_instance(bsdf, self.textures,
+                                            prefix=None if bsdf.id else f"{shape_name}.bsdf"))
         return self.bsdf_ids[key]
 
     def triangles(self, m: Any) -> tuple[np.ndarray, np.ndarray, int]:
@@ -150,13 +155,14 @@ class _Flattener:
         return v, f, flags
 
     def shape(self, shape_index: int, shape: Any, triangulate: bool) -> None:
-        bsdf = self.bsdf_id(shape.bsdf)
+        name = shape.id or f"shape{shape_index}"
+        bsdf = self.bsdf_id(shape.bsdf, name)
         emitter = -1
         if shape.emitter is not None:
             emitter = len(self.emitters)
             self.emitters.append(area_instance(shape.emitter, self.textures))
             # named as Mitsuba's traverse names it (`light.emitter.radiance`)
-            self.emitters[-1].name = f"{shape.id or f'shape{shape_index}'}.emitter"
+            self.emitters[-1].name = f"{name}.emitter"
         row = len(self.G)
         if shape.curves is not None:  # G's first entry is set by finish(), with the curves
             c = shape.curves
@@ -196,12 +202,13 @@ class _Flattener:
         group = shape.children[0]
         if id(group) not in self.groups:
             entries, parts = [], []
-            for child in group.children:
+            for k, child in enumerate(group.children):
                 first = self.nt
                 v, f, flags = self.triangles(child.mesh)
                 self.tri_meshes.append((first, child.mesh, child.bsdf))
                 parts.append((v, f))
-                entries.append((first, self.bsdf_id(child.bsdf),
+                child_name = child.id or f"{group.id or 'shapegroup'}.shape{k}"
+                entries.append((first, self.bsdf_id(child.bsdf, child_name),
                                 flags | INSTANCED | one_prim(child)))
             self.groups[id(group)] = (EmbreeGroup(parts), entries)
         embree_group, entries = self.groups[id(group)]

@@ -195,8 +195,7 @@ class Scene:
         except NoRayTracer:  # one line: what is missing, not the integrator's source
             raise CompileError(_no_ray_tracer(self.path, self.build.target.name)) from None
         if not self.specialize:  # and so do the tables the plugins compute per scene
-            self.prm = fill_tables(mod, self.scene_spec, self.prm, src, kw["filename"],
-                                   self.search_paths)
+            self.prm = self.with_tables(self.prm, mod)
         self._module = mod
         self.compile_seconds = mod.compile_seconds
         self.from_cache = mod.from_cache
@@ -301,6 +300,14 @@ class Scene:
         if getattr(self, "_params", None) is None or self._params.scene is not self:
             self._params = SceneParams(self)
         return self._params
+
+    def with_tables(self, prm: np.ndarray, mod: Any) -> np.ndarray:
+        """``prm`` (a generic build's parameters) with the tables that ``mod``, this scene's
+        generic kernels, read filled in: each plugin's precomputed samples for the values
+        the scene was loaded with (the differentiated twins take the scene's parameters
+        and fill their tables so, whether or not the scene's own generic kernels ran)."""
+        src, kw = self._jit_inputs
+        return fill_tables(mod, self.scene_spec, prm, src, kw["filename"], self.search_paths)
 
     def use_generic(self) -> None:
         """Read parameters at run time from now on (a parameter was assigned)."""
