@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import re
 
+import numpy as np
 import pytest
 
 import rdsl
@@ -83,3 +84,40 @@ def test_two_twosided_walls_keep_apart(tmp_path):
     assert {"green.brdf_0.reflectance", "red.brdf_0.reflectance"} <= set(scene.params.keys())
     scene.params["red.brdf_0.reflectance.value"] = [0.9, 0.1, 0.1]
     assert list(scene.params["green.brdf_0.reflectance"]) == pytest.approx([0.2, 0.5, 0.3])
+
+
+NESTED = """<scene version="3.0.0">
+<sensor type="perspective"><transform name="to_world"><lookat origin="0,1,5" target="0,0,0"
+  up="0,1,0"/></transform><film type="hdrfilm"><integer name="width" value="8"/>
+  <integer name="height" value="8"/></film></sensor>
+<shape type="rectangle" id="floor"><bsdf type="diffuse"><texture type="bitmap"
+  name="reflectance"><string name="filename" value="tex.exr"/></texture></bsdf></shape>
+<shape type="sphere" id="ball"><bsdf type="roughconductor"><texture type="checkerboard"
+  name="alpha"><float name="color0" value="0.1"/><float name="color1" value="0.3"/>
+  </texture></bsdf></shape>
+<shape type="sphere" id="lamp"><point name="center" x="1" y="2" z="1"/>
+  <float name="radius" value="0.2"/><emitter type="area"><texture type="checkerboard"
+  name="radiance"><rgb name="color0" value="0.9, 0.8, 0.7"/></texture></emitter></shape>
+</scene>"""
+
+
+def test_bsdfs_and_textures_without_ids_are_named_as_mi_traverse(tmp_path):
+    # named after the shape, `floor.bsdf.reflectance.data`, as Mitsuba names them: before,
+    # each took its plugin's type (`diffuse.reflectance`, `checkerboard.color0`), so two of
+    # a kind took one name, and a bitmap without an id offered no texels
+    from rdsl.runtime.render.image import write_exr
+
+    texels = np.random.default_rng(0).random((4, 6, 3)).astype(np.float32)
+    write_exr(tmp_path / "tex.exr", texels)
+    (tmp_path / "scene.xml").write_text(NESTED)
+    mi = pytest.importorskip("mitsuba")
+    mi.set_variant("scalar_rgb")
+    theirs = {k for k in mi.traverse(mi.load_file(str(tmp_path / "scene.xml"))).keys()
+              if k.endswith((".value", ".data"))}
+    scene = rdsl.load_scene(tmp_path / "scene.xml")
+    ours = {k if k.endswith(".data") else f"{k}.value" for k in scene.params.keys()}
+    assert {"floor.bsdf.reflectance.data", "ball.bsdf.alpha.color0.value",
+            "lamp.emitter.radiance.color0.value"} <= theirs
+    assert theirs <= ours, theirs - ours
+    np.testing.assert_allclose(scene.params["floor.bsdf.reflectance.data"], texels, rtol=1e-6)
+    assert scene.params["ball.bsdf.alpha.color1"].tolist() == pytest.approx([0.3])

@@ -31,6 +31,7 @@ per tree) is not folded into the coefficients: it becomes the mixture's ``w0``/`
 
 from __future__ import annotations
 
+import contextlib
 import re
 from collections.abc import Iterator
 from dataclasses import dataclass, replace
@@ -261,8 +262,11 @@ def bsdf_instance(plugin: Any, textures: Any = None, prefix: str | None = None) 
     params["factors"] = sum(mode << (4 * i + 2 * j) for i, fs in enumerate(factors)
                             for j, mode in fs)
     params["w0"], params["w1"] = (tree.weights + [1.0, 1.0])[:TEXTURED_WEIGHTS]
-    leaves = [replace(leaf_instance(t.leaf, textures), name=".".join((top, *t.path)))
-              for t in terms]
+    leaves = []
+    for t in terms:  # each leaf's textures without ids named after the leaf's path
+        name = ".".join((top, *t.path))
+        with textures.owned_by(name) if textures is not None else contextlib.nullcontext():
+            leaves.append(replace(leaf_instance(t.leaf, textures), name=name))
     return Instance("mixture", params, plugin.id or plugin.type, leaves)
 
 

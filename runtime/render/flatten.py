@@ -129,8 +129,10 @@ class _Flattener:
         key = id(bsdf)
         if key not in self.bsdf_ids:
             self.bsdf_ids[key] = len(self.bsdfs)
-            self.bsdfs.append(bsdf_instance(bsdf, self.textures,
-                                            prefix=None if bsdf.id else f"{shape_name}.bsdf"))
+            name = bsdf.id or f"{shape_name}.bsdf"
+            with self.textures.owned_by(name):  # its textures without ids: <name>.<param>
+                self.bsdfs.append(bsdf_instance(bsdf, self.textures,
+                                                prefix=None if bsdf.id else name))
         return self.bsdf_ids[key]
 
     def triangles(self, m: Any) -> tuple[np.ndarray, np.ndarray, int]:
@@ -160,7 +162,8 @@ class _Flattener:
         emitter = -1
         if shape.emitter is not None:
             emitter = len(self.emitters)
-            self.emitters.append(area_instance(shape.emitter, self.textures))
+            with self.textures.owned_by(f"{name}.emitter"):
+                self.emitters.append(area_instance(shape.emitter, self.textures))
             # named as Mitsuba's traverse names it (`light.emitter.radiance`)
             self.emitters[-1].name = f"{name}.emitter"
         row = len(self.G)

@@ -23,6 +23,8 @@ images are sRGB-encoded and are linearized unless ``raw`` is set, EXR images are
 
 from __future__ import annotations
 
+import contextlib
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
@@ -122,6 +124,29 @@ class TextureTable:
         self._attributes: list[tuple[Instance, Any, str]] = []  # mesh_attribute instances
         self._tables: dict[Any, int] = {}  # key -> index in T of a BSDF's table (floats())
         self._volumes: dict[tuple[int, str], int] = {}  # (id(volume), usage) -> offset
+        self.owner: str | None = None  # the name of what references textures now (owned_by)
+
+    @contextlib.contextmanager
+    def owned_by(self, name: str) -> Iterator[None]:
+        """Textures without an id referenced in this block are named after ``name`` and
+        the parameter they set (``<bsdf>.reflectance``), as Mitsuba's ``mi.traverse`` names
+        them; a texture nested in one after it (``<bsdf>.reflectance.color0``)."""
+        old, self.owner = self.owner, name
+        try:
+            yield
+        finally:
+            self.owner = old
+
+    def _name(self, plugin: Any, what: str, nested: bool) -> str:
+        """The instance name of texture ``plugin`` setting ``what`` (its owner's type or
+        name, a dot, the parameter)."""
+        if plugin.id:
+            return plugin.id
+        if nested:  # ``what`` is the enclosing texture's name and the colour's key
+            return what
+        if self.owner and "." in what:
+            return f"{self.owner}.{what.split('.', 1)[1]}"
+        return plugin.type
 
     def fill_attributes(self, meshes: list[tuple[int, Any, Any]]) -> None:
         """Store the values of the mesh_attribute textures for ``meshes``, (first triangle,
@@ -175,9 +200,10 @@ class TextureTable:
             k = len(self.instances)
             self._ids[key] = (plugin, k)
             self.instances.append(Instance(plugin.type))
+            name = self._name(plugin, what, bool(self._building))
             self._building.add(key)
             try:
-                self.instances[k] = self._instance(plugin, what, usage)
+                self.instances[k] = self._instance(plugin, what, usage, name)
             finally:
                 self._building.discard(key)
         return TextureRef(self._ids[key][1])
@@ -191,9 +217,8 @@ class TextureTable:
             [encode_texels(t, model) if colour else t for t, colour in self._texels]),
             np.float32)
 
-    def _instance(self, plugin: Any, what: str, usage: str) -> Instance:
+    def _instance(self, plugin: Any, what: str, usage: str, name: str) -> Instance:
         p = plugin.params
-        name = plugin.id or plugin.type
         emitted = usage == "emitted"
         if getattr(plugin, "decl", None) is not None:  # its textures are nested ones
             # a texture's constant colours are reflectances wherever it is used
