@@ -121,3 +121,8 @@ def test_bsdfs_and_textures_without_ids_are_named_as_mi_traverse(tmp_path):
     assert theirs <= ours, theirs - ours
     np.testing.assert_allclose(scene.params["floor.bsdf.reflectance.data"], texels, rtol=1e-6)
     assert scene.params["ball.bsdf.alpha.color1"].tolist() == pytest.approx([0.3])
+    # where a bitmap's texels lie and how they are read are not the scene's values to set
+    # (an offset past the texel buffer would read outside it)
+    for layout in ("offset", "width", "height", "filter", "wrap", "emitted"):
+        assert f"floor.bsdf.reflectance.{layout}" not in scene.params
+    assert "ball.bsdf.alpha.nested0" not in scene.params

@@ -102,10 +102,10 @@ def dispersion_warnings(desc: Any, model: ColorModel) -> list[str]:
 
 
 @cache
-def plugin_params(plugin: str) -> dict[str, str]:
+def plugin_params(plugin: str, kind: str = "bsdf") -> dict[str, str]:
     """The stdlib plugin's ``param`` names and types, read from its source (cheaply: the
     stdlib is not parsed before the kernel is compiled)."""
-    decl = stdlib_plugin("bsdf", plugin)
+    decl = stdlib_plugin(kind, plugin)
     assert decl is not None, plugin
     src = decl.path.read_text()
     return dict(re.findall(r"^\s*param\s+(\w+)\s*:\s*(\w+)", src, re.MULTILINE))

@@ -34,6 +34,7 @@ from __future__ import annotations
 
 from collections.abc import Iterator, MutableMapping
 from dataclasses import dataclass
+from functools import cache
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -44,7 +45,8 @@ from ...compiler.ir import ScalarType
 from ...compiler.passes.specialize import parameter_slots
 from ...core.color import ColorModel
 from ...core.scene_spec import Instance, SceneSpec, Slot
-from ..plugins import INTERNAL
+from ..plugins import INTERNAL, stdlib_plugin
+from .bsdfs import plugin_params
 from .integrators import integrator_instances
 from .prebuild import speculate
 
@@ -64,10 +66,23 @@ def param_slots(spec: SceneSpec) -> dict[str, Slot]:
         for inst in getattr(spec, kind):
             if inst.plugin in INTERNAL:  # a combinator tree's own numbers (its leaves are
                 continue  # named by their path: runtime/render/bsdfs.py)
+            hidden = layout_params(inst.plugin) if kind == "textures" else frozenset()
             for key, value in inst.params.items():
-                if isinstance(value, Slot):
+                if isinstance(value, Slot) and key not in hidden:
                     out[f"{inst.name or inst.plugin}.{mitsuba_key(key, inst.params)}"] = value
     return out
+
+
+@cache
+def layout_params(texture: str) -> frozenset[str]:
+    """A stdlib texture's Int and Bool params: where its texels lie and how they are read
+    (a bitmap's offset, size, filter and wrap mode, a flag), which the generic build reads
+    from ``PRM`` like the rest but which are not the scene's values to assign (an offset
+    past the texel buffer would read outside it) or differentiate: not in ``scene.params``."""
+    if stdlib_plugin("texture", texture) is None:
+        return frozenset()
+    return frozenset(name for name, rdsl_type in plugin_params(texture, "texture").items()
+                     if rdsl_type in ("Int", "Bool"))
 
 
 def mitsuba_key(key: str, params: dict[str, Any]) -> str:
