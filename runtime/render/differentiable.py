@@ -6,11 +6,11 @@ them: ``red.reflectance.value`` (a BSDF's ``reflectance``, the BSDF's id first),
 ``path.max_depth``, and ``<id>.data`` for the texels of a bitmap texture (an (H, W, 3)
 array of linear RGB, in the ``rgb`` and ``mono`` variants).  An object without an id is
 named after its owner (``<shape>.bsdf``, ``<bsdf>.reflectance``: flatten.py, textures.py).
-The names without the trailing ``.value`` are accepted too.  Texels live in the texel buffer ``T``, which every
-build reads at run time: assigning them changes the next render without compiling.  Reading
-gives the value the scene has; assigning one switches the scene to the generic build
-(parameters read at run time from its buffer ``PRM``: docs/renderer.md), once, so the next
-render uses it without compiling again.
+The names without the trailing ``.value`` are accepted too.  Texels live in the texel
+buffer ``T``, which every build reads at run time: assigning them changes the next render
+without compiling.  Reading gives the value the scene has; assigning one switches the
+scene to the generic build (parameters read at run time from its buffer ``PRM``:
+docs/renderer.md), once, so the next render uses it without compiling again.
 
 ``scene.render_forward(name, spp=, seed=, tangent=)`` returns the image and its derivative
 along ``tangent`` in the parameter's space (all ones by default: the derivative with
@@ -105,9 +105,10 @@ class Texels:
 
 
 def texel_params(textures: list[Instance], model: ColorModel) -> dict[str, Texels]:
-    """``<name>.data`` -> the texels of each bitmap texture but those an emitter's light
-    reads without an owner to name them after (colours are stored as linear RGB in ``mono``
-    and ``rgb``; the spectral variants store coefficients: none)."""
+    """``<name>.data`` -> the texels of each bitmap texture named by its id or its owner (a
+    BSDF's, an area light's; not an emitter plugin's own, named ``bitmap``; colours are
+    stored as linear RGB in ``mono`` and ``rgb``; the spectral variants store
+    coefficients: none)."""
     out: dict[str, tuple[list[tuple[int, float]], tuple[int, int, int]]] = {}
     if model.spectral:
         return {}

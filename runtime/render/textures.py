@@ -138,8 +138,10 @@ class TextureTable:
             self.owner = old
 
     def _name(self, plugin: Any, what: str, nested: bool) -> str:
-        """The instance name of texture ``plugin`` setting ``what`` (its owner's type or
-        name, a dot, the parameter)."""
+        """The instance name of texture ``plugin`` setting ``what``: its id; else, nested
+        in a texture, ``what`` itself (that texture's name and the colour's key); else the
+        owner's name and the parameter (``what`` is ``<plugin type>.<param>``); else, with
+        no owner (an emitter plugin's), its type."""
         if plugin.id:
             return plugin.id
         if nested:  # ``what`` is the enclosing texture's name and the colour's key
