@@ -87,11 +87,11 @@ class Checkpoints:
             return None
         offset, size = self.loops[id(ins)]
         if self.covers:
-            xs = iter([b.op(Op.LOAD, F32, self.buf, i) for i in self._slot(k, size, offset, b)])
+            xs = self._loads(k, size, offset, b)
             return [*[_unpack(xs, a.type, b) for a in ins.regions[0].args[:-1]], k], None
         last = b.const(self.cap - 1, I32)
         c = b.op(Op.SELECT, I32, b.op(Op.LT, BOOL, k, last), k, last)
-        xs = iter([b.op(Op.LOAD, F32, self.buf, i) for i in self._slot(c, size, offset, b)])
+        xs = self._loads(c, size, offset, b)
         state = [_unpack(xs, a.type, b) for a in ins.regions[0].args[:-1]]
         return [*state, c], b.op(Op.SUB, I32, k, c)
 
@@ -121,7 +121,7 @@ class Checkpoints:
         self.size += (self.cap + 1) * size
         b = Builder(Block(), loop.loc)
         if self.covers:  # every iteration's values are on the tape
-            xs = iter([b.op(Op.LOAD, F32, self.buf, i) for i in self._slot(k, size, offset, b)])
+            xs = self._loads(k, size, offset, b)
             loaded = [_unpack(xs, v.type, b) for v in used]
             _replace(sweep, dict(zip(used, loaded)))
             block.instrs = [*block.instrs[:start], *b.block.instrs, *sweep]
@@ -129,7 +129,7 @@ class Checkpoints:
         cond = b.op(Op.LT, BOOL, k, b.const(self.cap, I32))
         then, other = Block(), Block()
         tb = Builder(then, loop.loc)
-        xs = iter([tb.op(Op.LOAD, F32, self.buf, i) for i in self._slot(k, size, offset, tb)])
+        xs = self._loads(k, size, offset, tb)
         tb.yield_(*[_unpack(xs, v.type, tb) for v in used])
         other.instrs = list(new)
         Builder(other, loop.loc).yield_(*used)
@@ -163,6 +163,10 @@ class Checkpoints:
                  "tape_covers": self.covers},
                 {"name": TAPE_ROW, "type": {"kind": "scalar", "dtype": "i32"},
                  "uniform": False, "default": None, "leaves": [TAPE_ROW]}]
+
+    def _loads(self, slot: Value, size: int, offset: int, b: Builder) -> Iterator[Value]:
+        """The ``size`` floats of slot ``slot`` of a loop's part, loaded from the tape."""
+        return iter([b.op(Op.LOAD, F32, self.buf, i) for i in self._slot(slot, size, offset, b)])
 
     def _slot(self, slot: Value, size: int, offset: int, b: Builder,
               count: int | None = None) -> list[Value]:

@@ -37,7 +37,7 @@ from ...core.scene_spec import Slot
 from ..scene.samplers import sample_count
 from .differentiable import Texels, _lookup, ad_twin, adjoint_seeds, integrator_names
 from .film import film_reach, film_uniforms
-from .kernel_source import SCENE_BUFFERS
+from .kernel_source import SCENE_BUFFERS, batch_row
 
 if TYPE_CHECKING:
     from .renderer import Scene
@@ -119,13 +119,11 @@ def _film_weights(scene: Scene, mod: Any, spp: int, seed: int,
     pixels = np.arange(acc.size, dtype=np.int32)
     j = np.arange(cells * batch, dtype=np.int32)
     block = np.empty(planes * j.size, np.float32)
-    seed_bits = int(np.uint32(seed).view(np.int32))
     for done in range(0, spp, batch):
         m = min(batch, spp - done)
         ns = cells * m
         S = block[:planes * ns]
-        mod["film_weight_sample"](j[:ns], np.array([done, spp, seed_bits, ns], np.int32), S,
-                                  threads=threads)
+        mod["film_weight_sample"](j[:ns], batch_row(done, spp, seed, ns), S, threads=threads)
         mod["film_weight_pass"](pixels, np.array([m, ns], np.int32), S, acc, threads=threads)
     return acc
 
@@ -155,7 +153,6 @@ def backward(scene: Scene, d_img: Any, params: list[str], spp: int | None = None
     film = film_uniforms(scene.desc.sensor.film, 1, channels=1)
     cells = film["grid_w"] * film["grid_h"]
     batch = max(1, min(spp, BATCH_SAMPLES // max(cells, 1)))
-    seed_bits = int(np.uint32(seed).view(np.int32))
     kernel = next(k for k in mod.manifest["kernels"] if k["name"] == "render_sample_loss")
     names = [p["name"] for p in kernel["params"]]
     parts = _Parts(prm, scene.buffers.T, any(isinstance(c, Texels) for c in chosen.values()),
@@ -178,7 +175,7 @@ def backward(scene: Scene, d_img: Any, params: list[str], spp: int | None = None
                    "ad_row_tape": parts.rows(n, floats, interleaved=True),
                    "ad_row_T": parts.rows(n, scene.buffers.T.size)
                    if parts.texels else np.zeros(n, np.int32)}
-        uniform["BATCH"] = np.array([done, spp, seed_bits], np.int32)
+        uniform["BATCH"] = batch_row(done, spp, seed)
         args = [(varying[x], True) if x in varying else (uniform[x], False)
                 if x in uniform else (_seed(x, ones[:n]), True) for x in names]
         parts.run(partial(_adjoint_part, mod["render_sample_loss"], args), n)

@@ -127,8 +127,13 @@ def integrator_names(scene: Scene) -> list[str]:
     return [i.name or i.plugin for i in integrator_instances(scene.desc.integrator)]
 
 
+def _key(slots: dict[str, Slot], name: str) -> str:
+    """The slot key of parameter ``name`` (Mitsuba's trailing ``.value`` may be left out)."""
+    return name[:-len(".value")] if name.endswith(".value") and name not in slots else name
+
+
 def _lookup(slots: dict[str, Slot], name: str) -> tuple[str, Slot]:
-    key = name[:-len(".value")] if name.endswith(".value") and name not in slots else name
+    key = _key(slots, name)
     if key not in slots:
         valid = ", ".join(n if n.startswith(("path.", "direct.")) or n.endswith(".data")
                           else f"{n}.value" for n in slots)
@@ -192,8 +197,7 @@ class SceneParams(MutableMapping):
             T[off:off + texels.size] = flat / np.float32(scale)
 
     def __contains__(self, name: object) -> bool:
-        return isinstance(name, str) and (
-            name in self.slots or name.endswith(".value") and name[:-6] in self.slots)
+        return isinstance(name, str) and _key(self.slots, name) in self.slots
 
     def __delitem__(self, name: str) -> None:
         raise TypeError("scene parameters cannot be deleted")

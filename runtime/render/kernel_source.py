@@ -48,6 +48,12 @@ SAMPLER_KINDS = {"independent": 0, "stratified": 1, "multijitter": 3, "orthogona
                  "ldsampler": 6}
 
 
+def batch_row(first: int, spp: int, seed: int, *more: int) -> np.ndarray:
+    """``BATCH`` of ``render_sample`` and its kin (stdlib/render/kernel.rdsl.in): the first
+    sample of the batch, the samples per pixel, the seed's 32 bits as an Int, then ``more``."""
+    return np.array([first, spp, int(np.uint32(seed).view(np.int32)), *more], np.int32)
+
+
 def sampler_kind(sampler: Any) -> int:
     """The Sampler `kind` of the scene's sampler (a stratified one without jitter: 2, an
     orthogonal one: 5)."""

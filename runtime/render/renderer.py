@@ -44,7 +44,7 @@ from .film import (COLOUR_CHANNELS, colour_image, develop, film_format, film_uni
                    new_accumulator)
 from .flatten import SceneBuffers, flatten
 from .integrators import integrator_instances, integrator_plan
-from .kernel_source import film_channels, kernel_source, scene_plugins
+from .kernel_source import batch_row, film_channels, kernel_source, scene_plugins
 from .prebuild import wait_for_speculated
 from .progress import Progress
 from .shapes import FLAGS as SHAPE_FLAGS
@@ -438,7 +438,6 @@ class Scene:
         # reused two batches later, so no batch faults in fresh pages
         outs: list[Any] = [None, None]
         j = np.arange(cells * batch, dtype=np.int32)  # a batch's sample indices
-        seed_bits = int(np.uint32(seed).view(np.int32))
         waiting = None  # (samples, n) of the rendered batch the film has not taken yet
         done = k = 0
         while done < spp or waiting is not None:
@@ -447,7 +446,7 @@ class Scene:
                 n = min(batch, spp - done)
                 if n != batch:  # the last, smaller batch
                     outs = [None, None]
-                rs = np.array([done, spp, seed_bits], np.int32)
+                rs = batch_row(done, spp, seed)
                 job = mod["render_sample"](j[:cells * n], rs, *scene_args,
                                            *self._param_args(mod), threads=threads,
                                            out=outs[k % 2], wait=False)
