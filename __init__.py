@@ -4,6 +4,8 @@
 ``rdsl compile`` wrote, ``rdsl.load_scene(path)`` loads a Mitsuba scene for rendering
 (``rdsl.load_dict(d)`` one given as Mitsuba 3's Python dictionary) and
 ``rdsl.register_plugin(path_or_source)`` makes a plugin file available to every scene.
+A mistake in a program or a scene raises ``rdsl.CompileError``, whose message names the
+file and line; a wrong array passed to a kernel, a ``ValueError`` naming the parameter.
 """
 
 __version__ = "0.1.0"
@@ -28,6 +30,10 @@ def __getattr__(name: str):
         from .compiler.build import Build
 
         return Build
+    if name == "CompileError":  # a mistake in a program or a scene
+        from .compiler.diagnostics import CompileError
+
+        return CompileError
     if name == "optim":
         from .runtime import optim
 

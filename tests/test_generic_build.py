@@ -123,6 +123,33 @@ def test_report_compares_instruction_counts(tmp_path, capsys):
     print(m[0])
 
 
+@needs_cbox
+def test_an_integer_beyond_float_precision_renders_specialized_only(tmp_path, capsys):
+    """max_depth 2**25: a valid integer the specialized build folds; the generic build's
+    float parameter buffer (also the differentiated kernels') cannot hold it exactly, an
+    error at the integrator's line, not a traceback or a silently rounded depth."""
+    from rdsl.compiler.diagnostics import CompileError
+
+    text = CBOX.read_text()
+    assert '<integrator type="path">' in text
+    path = tmp_path / "cbox.xml"
+    path.write_text(text.replace('name="max_depth" value="$max_depth"',
+                                 'name="max_depth" value="33554432"'))
+    for f in CBOX.parent.iterdir():
+        if f.name != CBOX.name:
+            (tmp_path / f.name).symlink_to(f)
+    line = next(i for i, t in enumerate(path.read_text().splitlines(), 1)
+                if '<integrator type="path">' in t)
+    assert main(["render", str(path), "-D", "res=8", "--spp", "1", "-o",
+                 str(tmp_path / "out.exr"), "--report", "--quiet"]) == 0
+    assert "no generic build (an integer parameter of 2**24 or more)" in capsys.readouterr().out
+    for what in ("render", "params"):
+        scene = load_scene(path, res=8, specialize=what == "params")
+        with pytest.raises(CompileError) as e:
+            scene.render(spp=1) if what == "render" else scene.params
+        assert f"cbox.xml:{line}:" in str(e.value) and "33554432 is too large" in str(e.value)
+
+
 def test_fold_false_reads_parameters_from_prm():
     """``Specialize(scene, fold=False)``: same dispatch, parameters loaded from ``PRM``
     (threaded to the caller as its last argument); same results as the folded build."""

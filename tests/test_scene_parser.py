@@ -75,6 +75,11 @@ BAD_SCENES = {
                    '</shape>'], 3, "<float name=\"radius\">: cannot parse 'abc' as a float"),
     "bad_integer": (['<integrator type="path">', '    <integer name="max_depth" value="8.5"/>',
                      '</integrator>'], 3, "cannot parse '8.5' as an integer"),
+    "integer_out_of_range": (['<integrator type="path">',
+                              '    <integer name="max_depth" value="999999999999"/>',
+                              '</integrator>'], 3,
+                             "999999999999 is out of range for an integer (from -2147483648 "
+                             "to 2147483647, as in Mitsuba)"),
     "bad_boolean": (['<integrator type="path">',
                      '    <boolean name="hide_emitters" value="yes"/>', '</integrator>'], 3,
                     "expected 'true' or 'false', got 'yes'"),

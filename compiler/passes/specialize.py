@@ -115,6 +115,15 @@ ACCEL_PLACEHOLDER = "scene_uses_bvh"  # folded to the scene's choice of ray trac
 PARAM_BUFFER = "PRM"  # the generic build's parameter buffer
 
 
+class SlotRangeError(CompileError):
+    """An integer (``what``: ``<instance>.<param>``) that PRM's floats cannot hold exactly."""
+
+    def __init__(self, what: str, value: int) -> None:
+        self.what, self.value = what, value
+        super().__init__(f"{what}: {value} is too large for the generic build's parameter "
+                         "buffer (its floats hold integers exactly below 2**24)")
+
+
 def parameter_slots(scene: SceneSpec, model: ColorModel = RGB
                     ) -> tuple[SceneSpec, np.ndarray]:
     """The generic build's scene: every parameter value the scene sets (textures aside)
@@ -157,8 +166,7 @@ def parameter_slots(scene: SceneSpec, model: ColorModel = RGB
         for x in xs:
             if isinstance(x, (int, np.integer)) and not isinstance(x, bool) and \
                     abs(int(x)) >= 1 << 24:
-                raise CompileError(f"{what}: {x} is too large for the generic build's "
-                                   "parameter buffer (floats, exact below 2**24)")
+                raise SlotRangeError(what, int(x))
         out = Slot(len(values), len(xs))
         values.extend(float(x) for x in xs)
         return out

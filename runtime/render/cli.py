@@ -135,8 +135,9 @@ def _print_report(scene: Any, mod: Any) -> None:
     for line in scene.report:
         print(f"specialize: {line}")
     spec, generic = scene.instruction_counts()
-    print(f"render_sample: {spec} instructions specialized, {generic} generic "
-          f"({100 * (spec - generic) / generic:+.0f}%)")
+    print(f"render_sample: {spec} instructions specialized, " + (
+        f"{generic} generic ({100 * (spec - generic) / generic:+.0f}%)" if generic is not None
+        else "no generic build (an integer parameter of 2**24 or more)"))
     k = mod.manifest["kernels"]
     tier = ("quick tier: LLVM O0, for a small render not cached yet"
             if getattr(mod, "quick", False) else "full tier: LLVM O3")

@@ -42,7 +42,6 @@ import numpy as np
 from ...compiler.build import Build
 from ...compiler.diagnostics import CompileError
 from ...compiler.ir import ScalarType
-from ...compiler.passes.specialize import parameter_slots
 from ...core.color import ColorModel
 from ...core.scene_spec import Instance, SceneSpec, Slot
 from ..plugins import INTERNAL, stdlib_plugin
@@ -148,7 +147,7 @@ class SceneParams(MutableMapping):
     def __init__(self, scene: Scene) -> None:
         self.scene = scene
         spec = scene.scene_spec_for_params()
-        generic, self.values = parameter_slots(spec, scene.build.model)
+        generic, self.values = scene.parameter_slots(spec)
         self.slots = param_slots(generic)
         self.texels = texel_params(scene.buffers.textures, scene.build.model)
         self.slots.update(self.texels)  # for _lookup's names; read and set below

@@ -24,7 +24,12 @@ from ...compiler.backends.c_like import NoRayTracer
 from ...compiler.build import Build
 from ...compiler.diagnostics import CompileError
 from ...compiler.passes.ad_forward import TANGENT_BUFFER
-from ...compiler.passes.specialize import PARAM_BUFFER, describe, parameter_slots
+from ...compiler.passes.specialize import (
+    PARAM_BUFFER,
+    SlotRangeError,
+    describe,
+    parameter_slots,
+)
 from ...compiler.targets import Target
 from ...core.color import ColorModel
 from ...core.scene_spec import SceneSpec
@@ -266,7 +271,7 @@ class Scene:
         _, self.search_paths = scene_plugins(self.desc, self.bsdfs, self.emitters,
                                              self.buffers.textures)
         if not self.specialize:  # generic: parameter values come from PRM at run time
-            scene, prm = parameter_slots(scene, self.build.model)
+            scene, prm = self.parameter_slots(scene)
             if not self._prm_set:
                 self.prm = prm
         return src, scene, str(self.path.with_suffix(".rdsl"))
@@ -344,9 +349,26 @@ class Scene:
         return backward(self, d_img, params, spp, seed, threads, eliminate,
                         TAPE if tape is None else int(tape))
 
+    def parameter_slots(self, scene: SceneSpec) -> tuple[SceneSpec, np.ndarray]:
+        """The generic build's view of ``scene`` and its parameter buffer
+        (:func:`rdsl.compiler.passes.specialize.parameter_slots`); an integer it cannot
+        hold is an error at the scene's line that sets it."""
+        try:
+            return parameter_slots(scene, self.build.model)
+        except SlotRangeError as e:
+            raise CompileError(f"{e.what}: {e.value} is too large for the generic build and "
+                               "the differentiated kernels (their parameter buffer's floats "
+                               "hold integers exactly below 2**24); the specialized build "
+                               "renders it", self.desc.integer_loc(e.value)) from None
+
     def _folding(self, scene: SceneSpec) -> list[str]:
         """What the build folds (specialized) or reads at run time (generic), for the report."""
-        _, values = parameter_slots(scene, self.build.model)
+        try:
+            values = self.parameter_slots(scene)[1]
+        except CompileError:  # an integer only the specialized build can hold
+            if not self.specialize:
+                raise
+            values = []
         n = sum(1 for i in [*scene.bsdfs, *scene.bsdf_leaves, *scene.textures,
                             *scene.emitters, *scene.integrators] if i.params)
         kinds = {v: k for k, v in EMITTER_KINDS.items()}
@@ -375,14 +397,21 @@ class Scene:
         names = [p["name"] for p in kernel["params"]]
         return [self.prm] * (PARAM_BUFFER in names) + [self.tangents] * (TANGENT_BUFFER in names)
 
-    def instruction_counts(self) -> tuple[int, int]:
+    def instruction_counts(self) -> tuple[int, int | None]:
         """IR instructions of ``render_sample`` after the whole pipeline, specialized and
-        generic (compiles both to IR, builds no library: for ``rdsl render --report``)."""
+        generic (compiles both to IR, builds no library: for ``rdsl render --report``);
+        None for a generic build the scene's integers do not fit."""
         from ...compiler.driver import compile_kernels
 
         self.compile(quick=True)  # whichever tier is loaded
+        try:
+            generic = self.parameter_slots(self.scene_spec)[0]
+        except CompileError:
+            generic = None
         counts = []
-        for scene in (self.scene_spec, parameter_slots(self.scene_spec, self.build.model)[0]):
+        for scene in (self.scene_spec, generic):
+            if scene is None:
+                return counts[0], None
             module, _ = compile_kernels(self.kernel_src, self.build, scene=scene,
                                         filename=str(self.path.with_suffix(".rdsl")),
                                         search_paths=self.search_paths)

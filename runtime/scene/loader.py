@@ -106,6 +106,24 @@ class SceneDescription:
     def sensor(self) -> Sensor:
         return self.sensors[0]
 
+    def integer_loc(self, value: int) -> Loc:
+        """The line of the first plugin with an integer parameter equal to ``value`` (the
+        scene's first line if none has one)."""
+        stack: list[Any] = [self.integrator, *self.sensors, *self.shapes, *self.emitters,
+                            *self.ids.values()]
+        seen: set[int] = set()
+        while stack:
+            p = stack.pop(0)
+            if id(p) in seen:
+                continue
+            seen.add(id(p))
+            if p.loc is not None and any(type(v) is int and v == value
+                                         for v in p.params.values()):
+                return p.loc
+            stack.extend(v for f in vars(p).values()
+                         for v in (f if isinstance(f, list) else [f]) if isinstance(v, Plugin))
+        return Loc(str(self.path), 1, 1)
+
 
 def load_scene_description(path: str | Path, *, plugins: Any = (),
                            **defaults: Any) -> SceneDescription:

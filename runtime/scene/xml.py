@@ -418,10 +418,14 @@ class _Reader:
                 raise scene_error(f"{what}: cannot parse '{value}' as a float", el.loc) from None
         if tag == "integer":
             try:
-                return int(value.strip())
+                n = int(value.strip())
             except ValueError:
                 raise scene_error(f"{what}: cannot parse '{value}' as an integer",
                                   el.loc) from None
+            if not -(1 << 31) <= n < 1 << 31:  # Mitsuba's properties hold 32-bit integers
+                raise scene_error(f"{what}: {n} is out of range for an integer (from "
+                                  f"{-(1 << 31)} to {(1 << 31) - 1}, as in Mitsuba)", el.loc)
+            return n
         if tag == "boolean":
             v = value.strip().lower()
             if v not in ("true", "false"):
