@@ -13,7 +13,7 @@ import pytest
 
 pytest.importorskip("rdsl.runtime.embree")
 
-from _scenes import CBOX
+from _scenes import CBOX, edited_copy
 from rdsl.cli import main
 from rdsl.runtime.render.renderer import load_scene
 from test_scene_bsdfs import BSDFS, OBLIQUE, scene_xml
@@ -130,14 +130,8 @@ def test_an_integer_beyond_float_precision_renders_specialized_only(tmp_path, ca
     error at the integrator's line, not a traceback or a silently rounded depth."""
     from rdsl.compiler.diagnostics import CompileError
 
-    text = CBOX.read_text()
-    assert '<integrator type="path">' in text
-    path = tmp_path / "cbox.xml"
-    path.write_text(text.replace('name="max_depth" value="$max_depth"',
-                                 'name="max_depth" value="33554432"'))
-    for f in CBOX.parent.iterdir():
-        if f.name != CBOX.name:
-            (tmp_path / f.name).symlink_to(f)
+    path = edited_copy(CBOX, tmp_path, 'name="max_depth" value="$max_depth"',
+                       'name="max_depth" value="33554432"')
     line = next(i for i, t in enumerate(path.read_text().splitlines(), 1)
                 if '<integrator type="path">' in t)
     assert main(["render", str(path), "-D", "res=8", "--spp", "1", "-o",

@@ -16,6 +16,7 @@ returns among the search paths to compile the kernel with.
 
 from __future__ import annotations
 
+import math
 from functools import cache
 from pathlib import Path
 from string import Template
@@ -75,8 +76,11 @@ def literal(value: Any, struct: str | None = None) -> str:
         return "true" if value else "false"
     if isinstance(value, (int, np.integer)):
         return str(int(value))
-    text = repr(float(np.float32(value)))
-    return text if ("." in text or "e" in text or "n" in text) else text + ".0"
+    f = float(np.float32(value))
+    if not math.isfinite(f):  # no literal spells these: the prelude's functions do
+        return "nan()" if math.isnan(f) else "infinity()" if f > 0 else "-infinity()"
+    text = repr(f)
+    return text if ("." in text or "e" in text) else text + ".0"
 
 
 @cache
@@ -269,8 +273,8 @@ def kernel_source(desc: Any, bufs: SceneBuffers, bsdfs: list[Instance],
     if alpha:  # the film's alpha, right after the colour as in Mitsuba's film
         aov_fields.insert(0, ("Float", "select(valid, 1.0, 0.0)"))
     value_type = "Vec3" if spectral else "Unpolarized" if mono_pol else "Spectrum"
-    value = ("to_srgb(L * wavelength_weight)" if spectral else "unpolarized(L)"
-             if mono_pol else "L")
+    value = ("to_srgb(L_ok * wavelength_weight)" if spectral else "unpolarized(L_ok)"
+             if mono_pol else "L_ok")
     if derivative:
         aov_fields.append((value_type, f"derivative({value})"))
     film = film_uniforms(desc.sensor.film, 1,

@@ -17,6 +17,9 @@ def fov_x(p: dict[str, Any], aspect: float, loc: Callable[[str], Loc]) -> float:
         raise scene_error("give either 'fov' or 'focal_length', not both", loc("fov"))
     if p["fov"] is not None:
         fov, axis = p["fov"], p["fov_axis"]
+        if not 0 < fov < 180:  # NaN too
+            raise scene_error(f"'fov' must be between 0 and 180 degrees, got {fov:g}",
+                              loc("fov"))
         if axis == "smaller":
             axis = "y" if aspect > 1 else "x"
         elif axis == "larger":

@@ -8,6 +8,7 @@ collected; it uses the builder's ``what``, ``file`` and ``default``.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -37,6 +38,7 @@ if TYPE_CHECKING:
 # the largest Cauchy B term accepted (um^2): glasses are below 0.02, so a larger value is a
 # unit mistake (nm^2) rather than a material
 MAX_CAUCHY_B = 1.0
+MAX_PIXELS = 1 << 30  # a film's pixels (cells and samples are indexed with 32-bit Int)
 
 
 def _read_pbrdf(path: Path, loc: Loc | None) -> PBrdf:
@@ -243,6 +245,10 @@ class Finishers:
                                   f"crop_{size}={crop} do not fit in {size}={p[size]}",
                                   _loc(node, f"crop_{size}" if f"crop_{size}" in node.props
                                        else f"crop_offset_{axis}"))
+        if p["crop_width"] * p["crop_height"] > MAX_PIXELS:  # the kernels index with Int
+            raise scene_error(f"hdrfilm: {p['crop_width']} x {p['crop_height']} pixels is "
+                              f"more than the {MAX_PIXELS} (32768 x 32768) rdsl renders",
+                              _loc(node, "width"))
 
     def finish_rfilter(self, obj: Plugin, node: ObjectNode, objects: dict) -> None:
         for k, v in obj.params.items():
@@ -250,8 +256,9 @@ class Finishers:
                 if not np.isfinite(v):
                     raise scene_error(f"rfilter '{obj.type}': '{k}' must be finite",
                                       _loc(node, k))
-            elif v <= 0:
-                raise scene_error(f"rfilter '{obj.type}': '{k}' must be positive", _loc(node, k))
+            elif not 0 < v < math.inf:  # NaN too
+                raise scene_error(f"rfilter '{obj.type}': '{k}' must be positive and finite",
+                                  _loc(node, k))
 
     def finish_sampler(self, obj: Plugin, node: ObjectNode, objects: dict) -> None:
         finish_sampler(obj, lambda k: _loc(node, k))

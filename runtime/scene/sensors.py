@@ -9,6 +9,7 @@ pixel, as Mitsuba's documentation says, and get one by default.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 from typing import Any
 
@@ -44,6 +45,9 @@ def finish_sensor(obj: Any, loc: Callable[[str], Loc]) -> None:
                           "not allowed", loc("to_world"))
     if abs(np.linalg.det(m[:3, :3])) < 1e-30:
         raise scene_error(f"sensor '{obj.type}': 'to_world' is singular", loc("to_world"))
+    for name in ("near_clip", "far_clip", "focus_distance"):
+        if p.get(name) is not None and math.isnan(p[name]):
+            raise scene_error(f"'{name}' is not a number (nan)", loc(name))
     if p["near_clip"] <= 0:
         raise scene_error("'near_clip' must be greater than zero", loc("near_clip"))
     if p["near_clip"] >= p["far_clip"]:

@@ -46,6 +46,9 @@ def rotate(axis, angle_deg: float) -> np.ndarray:
 def look_at(origin, target, up=None) -> np.ndarray:
     """Mitsuba's ``Transform4f::look_at``; ``up`` may be omitted (any perpendicular is used)."""
     o = np.asarray(origin, dtype=np.float64)
+    if not (np.isfinite(o).all() and np.isfinite(target).all()
+            and (up is None or np.isfinite(up).all())):
+        raise ValueError("its points must be finite")
     d = np.asarray(target, dtype=np.float64) - o
     dn = np.linalg.norm(d)
     if dn == 0:

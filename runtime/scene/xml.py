@@ -476,7 +476,11 @@ class _Reader:
                     raise scene_error(f"<{op.tag}>: unexpected attribute '{k}'; accepted: "
                                       f"{', '.join(allowed)}", op.loc)
             a = {k: self.substitute(v, op) for k, v in op.attrs.items()}
-            m = self.transform_op(op, a) @ m
+            t = self.transform_op(op, a)
+            if not np.isfinite(t).all():  # an inf or nan number (a too large one overflows
+                # float32 later, at the shape: meshes.py)
+                raise scene_error(f"<{op.tag}>: a number is not finite", op.loc)
+            m = t @ m
         return m
 
     def vec3(self, op: Element, a: dict[str, str], default: float) -> np.ndarray:
@@ -504,7 +508,10 @@ class _Reader:
             if not np.any(axis):
                 raise scene_error("<rotate>: the rotation axis is zero; give x, y and/or z",
                                   op.loc)
-            return xf.rotate(axis, self.number(op, a, "angle", 0.0))
+            angle = self.number(op, a, "angle", 0.0)
+            if not math.isfinite(angle):
+                raise scene_error(f"<rotate>: the angle must be finite, got {angle:g}", op.loc)
+            return xf.rotate(axis, angle)
         if op.tag == "matrix":
             vals = parse_numbers(self.need(op, a, "value"), "<matrix>", op.loc)
             try:
