@@ -303,7 +303,8 @@ class Kernel:
             c_vals[slot], strides[slot] = a.ctypes.data, a.strides[0]
         out_arrays = self._outputs(out, n, mask is not None, c_vals, strides)
         for i, a in enumerate(self.args):
-            if a["kind"] == "buffer":
+            if a["kind"] == "buffer":  # held by the pending call until it is done
+                keep.append(c_vals[i])
                 c_vals[i] = c_vals[i].ctypes.data
         flat: list[Any] = []
         for v, stride, strided in zip(c_vals, strides, self._strided):

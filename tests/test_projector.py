@@ -85,7 +85,8 @@ BAD = {
     "scale_type": ('<string name="scale" value="x"/>', "parameter 'scale' of emitter "
                    "'projector' expects a float, got <string>"),
     "scale_negative": ('<float name="scale" value="-1"/>', "'scale' must be >= 0"),
-    "fov_range": ('<float name="fov" value="190"/>', "field of view (190 degrees) must be"),
+    "fov_range": ('<float name="fov" value="190"/>',
+                  "'fov' must be between 0 and 180 degrees, got 190"),
     "fov_and_focal_length": ('<float name="fov" value="30"/><string name="focal_length" '
                              'value="50mm"/>', "give either 'fov' or 'focal_length'"),
     "focal_length": ('<string name="focal_length" value="abc"/>', "cannot parse focal_length"),

@@ -335,3 +335,22 @@ def test_jit_exports_builds_only_the_named_kernels(tmp_path, monkeypatch):
     np.testing.assert_array_equal(only["square"](x), whole["square"](x))
     with pytest.raises(CompileError, match="no exported function 'cube'.*double, square"):
         rdsl.jit(src, exports=["cube"])
+
+
+def test_a_pending_call_holds_its_buffers():
+    """A buffer passed to a call that has not finished is the caller's to drop: the pending
+    call keeps it alive until ``result()`` (a render's BATCH row is a temporary)."""
+    import gc
+    import weakref
+
+    m = rdsl.jit("fn scaled(i: Int, B: [Float]) -> Float { return B[0] * Float(i); }")
+    buf = np.array([2.5], np.float32)
+    held = weakref.ref(buf)
+    pending = m.scaled(np.arange(100_000, dtype=np.int32), buf, threads=2, wait=False)
+    del buf
+    gc.collect()
+    assert held() is not None
+    np.testing.assert_array_equal(pending.result(), 2.5 * np.arange(100_000, dtype=np.float32))
+    del pending
+    gc.collect()
+    assert held() is None

@@ -38,6 +38,7 @@ from ..ir import (
     ScalarType,
     Value,
     clone_block,
+    replace_uses,
 )
 from . import Pass, register
 from .dce import eliminate_dead_code
@@ -208,6 +209,8 @@ class _Simplifier:
                     out.extend(peeled)
                     continue
                 self.block(ins.regions[0])
+                if not self.speculating:
+                    self.invariant_slots(ins)
             elif ins.op in PURE_OPS and len(ins.results) == 1 and not self.pure(ins):
                 continue
             out.append(ins)
@@ -246,6 +249,24 @@ class _Simplifier:
                     self.seen[key] = ins.result
                     self.scopes[-1].append(key)
         return clone.instrs[:-1]
+
+    def invariant_slots(self, loop: Instr) -> None:
+        """Carried values that every iteration passes on unchanged (the sampler's kind and
+        pixel key through a path tracer's bounces) are their initial values: uses in the body
+        and of the result are rewritten to it (DCE then drops the slot), so what depends on
+        them folds, and a constant one asks for another sweep to fold the body."""
+        body = loop.regions[0]
+        y = body.instrs[-1]
+        mapping: dict[Value, Value] = {}
+        for a, init, nxt, r in zip(body.args, loop.operands, y.operands[1:], loop.results):
+            if nxt is a or nxt is init:
+                mapping[a] = init
+                self.repl[r] = init
+        if not mapping:
+            return
+        replace_uses(body, mapping)
+        self.changed = True
+        self.again = self.again or any(v in self.consts for v in mapping.values())
 
     def pure(self, ins: Instr) -> bool:
         """Simplify a pure single-result instruction; False if it was replaced."""
