@@ -30,6 +30,7 @@ from typing import Any
 
 import numpy as np
 
+from ..core.cachedir import write_atomically
 from ..core.scene_spec import Instance, Slot, TextureRef
 from .diagnostics import CompileError
 from .ir import (
@@ -134,24 +135,7 @@ def _load(path: Any, n: int) -> np.ndarray | None:
 
 
 def _store(path: Any, samples: np.ndarray) -> None:
-    _write_atomically(path, lambda f: np.save(f, samples, allow_pickle=False))
-
-
-def _write_atomically(path: Any, dump: Any) -> None:
-    """``dump(file)`` into a temporary file in ``path``'s folder, then a rename: another
-    process reads a whole entry or none.  Silently nothing in a read-only or full cache
-    (what was computed is still right)."""
-    import os
-    import tempfile
-
-    try:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        fd, tmp = tempfile.mkstemp(dir=path.parent, suffix=".tmp")
-        with os.fdopen(fd, "wb") as f:
-            dump(f)
-        os.replace(tmp, path)
-    except OSError:
-        pass
+    write_atomically(path, lambda f: np.save(f, samples, allow_pickle=False))
 
 
 class _Kernel:
@@ -260,7 +244,7 @@ def _store_kernel(key: str, k: _Kernel) -> None:
 
     entry = {"so": k.lib._name, "symbol": k.symbol, "args": k.args,
              "defaults": k.defaults, "used": k.used}
-    _write_atomically(_kernel_entry(key), lambda f: pickle.dump(entry, f))
+    write_atomically(_kernel_entry(key), lambda f: pickle.dump(entry, f))
 
 
 def _reachable(module: Module, fn: Function) -> list[str]:

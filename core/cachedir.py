@@ -1,13 +1,15 @@
 """Where rdsl caches what it compiles: ``$RDSL_CACHE_DIR``, default ``~/.cache/rdsl`` (kernel
-libraries, runtime/cache.py; parsed sources, dsl/parser.py; table samples,
-compiler/precompute.py)."""
+libraries, runtime/cache.py; parsed sources and the parser's tables, dsl/parser.py; table
+samples, compiler/precompute.py; plugin signatures, runtime/plugins.py)."""
 
 from __future__ import annotations
 
 import hashlib
 import os
 from functools import lru_cache
+from collections.abc import Callable
 from pathlib import Path
+from typing import IO
 
 
 def cache_dir() -> Path:
@@ -30,3 +32,19 @@ def compiler_fingerprint() -> str:
         h.update(str(p.relative_to(root)).encode())
         h.update(p.read_bytes())
     return h.hexdigest()
+
+
+def write_atomically(path: Path, dump: Callable[[IO[bytes]], object]) -> None:
+    """``dump(file)`` into a temporary file in ``path``'s folder, then a rename: another
+    process reads a whole entry or none.  Silently nothing in a read-only or full cache
+    (what was computed is still right)."""
+    import tempfile
+
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        fd, tmp = tempfile.mkstemp(dir=path.parent, suffix=".tmp")
+        with os.fdopen(fd, "wb") as f:
+            dump(f)
+        os.replace(tmp, path)
+    except OSError:
+        pass

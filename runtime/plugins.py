@@ -72,8 +72,7 @@ class PluginDecl:
     path: Path
     line: int
     stdlib: bool = False
-    _checked: tuple[dict[str, ParamDecl], dict[str, tuple[tuple[Any, ...], Any]]] | None = \
-        field(default=None, repr=False)
+    _checked: Checked | None = field(default=None, repr=False)
 
     @property
     def where(self) -> str:
@@ -97,7 +96,7 @@ class PluginDecl:
         """The IR parameter types and result type of the plugin's function ``name``."""
         return self._check()[1][name]
 
-    def _check(self) -> tuple[dict[str, ParamDecl], dict[str, tuple[tuple[Any, ...], Any]]]:
+    def _check(self) -> Checked:
         if self._checked is None:
             self._checked = _checked(self.path.resolve(), self.kind, self.name, self.line,
                                      self.path.stat().st_mtime_ns)
@@ -112,12 +111,49 @@ def declared_params(plugin: Any) -> list[ParamDecl]:
             for s, d in zip(plugin.params, plugin.defaults)]
 
 
+Checked = tuple[dict[str, ParamDecl], dict[str, tuple[tuple[Any, ...], Any]]]
+
+
 @cache
-def _checked(path: Path, kind: str, name: str, line: int, mtime: int
-             ) -> tuple[dict[str, ParamDecl], dict[str, tuple[tuple[Any, ...], Any]]]:
+def _checked(path: Path, kind: str, name: str, line: int, mtime: int) -> Checked:
     """The params and functions (parameter and result types) of plugin ``name`` of
     ``path``, which the compiler's frontend checks (its diagnostics point into the file).
-    ``mtime`` keys the cache, so an edited file is read again."""
+    ``mtime`` keys this process's cache, so an edited file is read again; on disk
+    (``<cache>/signatures/``) the entry is keyed by the texts of the file and of all it
+    imports, so a process rendering a scene whose kernels are cached checks nothing (the
+    check was 0.2 s of such a render)."""
+    import pickle
+
+    from ..core.cachedir import cache_dir, write_atomically
+
+    entry = cache_dir() / "signatures" / f"{_signature_key(path, kind, name, line)}.pickle"
+    try:
+        return pickle.loads(entry.read_bytes())
+    except Exception:  # noqa: BLE001 - none yet, or a damaged entry: check the file
+        pass
+    got = _check_file(path, kind, name, line)
+    write_atomically(entry, lambda f: pickle.dump(got, f, protocol=pickle.HIGHEST_PROTOCOL))
+    return got
+
+
+def _signature_key(path: Path, kind: str, name: str, line: int) -> str:
+    """What a plugin's signature depends on: the compiler, the plugin and the texts (and
+    places) of the file and everything it imports."""
+    from .. import __version__
+    from ..compiler.sources import source_files
+    from ..core.cachedir import compiler_fingerprint
+
+    h = hashlib.sha256()
+    parts = [__version__, compiler_fingerprint(), kind, name, str(line)]
+    for f in source_files(path):
+        parts += [str(f), f.read_text(errors="replace")]
+    for part in parts:
+        b = part.encode()
+        h.update(f"{len(b)}:".encode() + b)
+    return h.hexdigest()
+
+
+def _check_file(path: Path, kind: str, name: str, line: int) -> Checked:
     from ..core.gcpause import gc_paused
     from ..dsl import check
 

@@ -107,3 +107,71 @@ def test_table_key_follows_the_code_and_values(roughplastic, tmp_path, monkeypat
     assert precompute._disk_entry(text, xs, params) != key  # the compiler
     # a texture: what the kernel call diagnoses, never read from disk
     assert precompute._disk_entry(text, xs, dict(params, alpha=TextureRef(0))) is None
+
+
+PLUGIN = """
+import bsdf.common;
+bsdf tinted {
+    param tint: Float = TINT;
+    fn eval(si: Surface, wo: Vec3) -> Spectrum { return Spectrum(tint * cos_theta(wo)); }
+    fn pdf(si: Surface, wo: Vec3) -> Float { return 0.0; }
+    fn sample(si: Surface, u1: Float, u2: Vec2) -> BsdfSample {
+        return BsdfSample { wo: Vec3(0.0, 0.0, 1.0), pdf: 0.0, eta: 1.0,
+                            weight: Spectrum(0.0), delta: false };
+    }
+}
+"""
+
+
+def test_plugin_signatures_are_kept_on_disk_by_the_texts(tmp_path, monkeypatch):
+    """A process that meets a plugin another one checked reads its params from the cache
+    (no check), and an edit of the file, or of a file it imports, is checked again."""
+    from rdsl.runtime import plugins
+
+    monkeypatch.setenv("RDSL_CACHE_DIR", str(tmp_path / "cache"))
+    path = tmp_path / "tinted.rdsl"
+    path.write_text(PLUGIN.replace("TINT", "0.25"))
+
+    def params() -> dict:
+        plugins._checked.cache_clear()  # as a new process would
+        decl = plugins.index_file(path)[0]
+        return {k: p.default for k, p in decl.params().items()}
+
+    assert params() == {"tint": 0.25}
+    checks = []
+    real = plugins._check_file
+    monkeypatch.setattr(plugins, "_check_file", lambda *a: checks.append(a) or real(*a))
+    assert params() == {"tint": 0.25} and checks == []  # from the disk, unchecked
+    path.write_text(PLUGIN.replace("TINT", "0.75"))
+    assert params() == {"tint": 0.75} and len(checks) == 1
+    # an imported file's text is part of the key: a copy of bsdf.common next to the plugin
+    # (imports resolve next to the importing file first) gets the plugin checked again
+    (tmp_path / "bsdf").mkdir()
+    common = STDLIB / "bsdf" / "common.rdsl"
+    (tmp_path / "bsdf" / "common.rdsl").write_text(common.read_text() + "\n// edited\n")
+    assert params() == {"tint": 0.75} and len(checks) == 2
+    for entry in (tmp_path / "cache" / "signatures").iterdir():  # a damaged entry: checked
+        entry.write_bytes(b"not a pickle")
+    assert params() == {"tint": 0.75} and len(checks) == 3
+
+
+def test_the_parser_tables_are_kept_on_disk(tmp_path):
+    """A new process loads the grammar's LALR tables (the same parses) instead of analysing
+    the grammar, and a damaged file is analysed again."""
+    import os
+    import subprocess
+    import sys
+
+    # the AST the transformer builds from the parse (not through the AST cache), hashed
+    script = ("import hashlib; from rdsl.dsl import parser as P; "
+              "src = open(P._GRAMMAR.parent.parent / 'stdlib' / 'bsdf' / 'plastic.rdsl').read();"
+              "print(hashlib.sha256(repr(P._parse(src, 'plastic.rdsl')).encode()).hexdigest())")
+    env = dict(os.environ, RDSL_CACHE_DIR=str(tmp_path))
+    runs = [subprocess.run([sys.executable, "-c", script], env=env, capture_output=True,
+                           text=True, check=True).stdout.split() for _ in range(2)]
+    (tables,) = (tmp_path / "lark").iterdir()
+    tables.write_bytes(b"damaged")
+    runs.append(subprocess.run([sys.executable, "-c", script], env=env, capture_output=True,
+                               text=True, check=True).stdout.split())
+    assert runs[0][0] == runs[1][0] == runs[2][0]  # the same parse tree each time
+    assert tables.stat().st_size > 10_000  # written again whole
