@@ -12,6 +12,8 @@ tests against the interpreter.  In detail:
   ``extract`` forwarded through ``make``/``insert``/``broadcast``;
 * an ``if`` with a constant condition is replaced by its taken region; a ``loop`` whose
   continue flag is constant false on the first iteration is replaced by one copy of its body;
+* a loop-carried value that every iteration passes on unchanged is its initial value (what
+  its uses in the body then decide folds in the next run of the pass);
 * pure ops are CSE'd within their scope; pure instructions, side-effect-free ``if``/``loop``
   and unused ``if``/``loop`` result slots are deleted;
 * functions neither exported (``attrs["export"]``) nor reachable by calls from an exported
@@ -254,7 +256,8 @@ class _Simplifier:
         """Carried values that every iteration passes on unchanged (the sampler's kind and
         pixel key through a path tracer's bounces) are their initial values: uses in the body
         and of the result are rewritten to it (DCE then drops the slot), so what depends on
-        them folds, and a constant one asks for another sweep to fold the body."""
+        them folds: in the body in the pipeline's next ``optimize`` (another sweep here, for
+        a constant one, cost more compile time than it saved)."""
         body = loop.regions[0]
         y = body.instrs[-1]
         mapping: dict[Value, Value] = {}
@@ -266,7 +269,6 @@ class _Simplifier:
             return
         replace_uses(body, mapping)
         self.changed = True
-        self.again = self.again or any(v in self.consts for v in mapping.values())
 
     def pure(self, ins: Instr) -> bool:
         """Simplify a pure single-result instruction; False if it was replaced."""
