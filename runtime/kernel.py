@@ -517,7 +517,7 @@ def _columns(cols: list[np.ndarray], n: int) -> np.ndarray:
     first = cols[0]
     step = first.itemsize * n
     base = first.base
-    if base is not None and all(c.base is base and
+    if n > 0 and base is not None and all(c.base is base and
                                 c.ctypes.data == first.ctypes.data + j * step
                                 for j, c in enumerate(cols)):
         row0 = (first.ctypes.data - base.ctypes.data) // step

@@ -185,6 +185,20 @@ def test_out_reuses_a_result(mod):
         mod["bsdf.shade"](_surf(5, rng), np.zeros((5, 3)), out=first)
 
 
+
+def test_zero_elements(mod):
+    """A call over no elements returns empty results of the right shapes (vectors (0, k)),
+    masked or into an empty ``out=``, rather than failing while it builds them."""
+    rng = np.random.default_rng(5)
+    si, wo = _surf(0, rng), np.zeros((0, 3), np.float32)
+    for res in (mod["bsdf.shade"](si, wo), mod["bsdf.shade"](si, wo, mask=np.zeros(0, bool))):
+        assert res["value"].shape == (0, 3) and res["value"].dtype == np.float32
+        assert res["pdf"].shape == (0,)
+    out = {"value": np.zeros((0, 3), np.float32), "pdf": np.zeros(0, np.float32)}
+    assert mod["bsdf.shade"](si, wo, out=out) is out
+    twice, any_ = mod.count(np.zeros(0, np.int32))
+    assert twice.shape == (0,) and any_.shape == (0,)
+
 def test_fresh_results_reuse_only_released_blocks(mod):
     """Large fresh results come from the kernel's output pool: a block is written again only
     once no result or view of it is alive, and a masked call still gets zeros outside the
