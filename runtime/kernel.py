@@ -20,6 +20,7 @@ from typing import Any
 import numpy as np
 
 from .out_pool import OutputPool
+from .overlap import Span, overwritten_inputs, shared_outputs
 
 DTYPES = {"f32": np.dtype(np.float32), "i32": np.dtype(np.int32),
           "u32": np.dtype(np.uint32), "u64": np.dtype(np.uint64), "bool": np.dtype(np.bool_)}
@@ -279,7 +280,9 @@ class Kernel:
         ``out``: arrays shaped like the result (the result of an earlier call over as many
         elements, or arrays of the caller's own, in any layout: a C-order ``(N, 4)`` array,
         columns of a record array); the kernel writes into them (lanes outside ``mask`` keep
-        their old values) and returns ``out``.  Without ``out``, large results are written
+        their old values) and returns ``out``.  ``out`` may be an input itself (``out=x``);
+        an input (or mask) in memory that ``out`` overwrites for another element is copied
+        first, as numpy's ufuncs do.  Without ``out``, large results are written
         into blocks of ``self.pool`` (see :mod:`rdsl.runtime.out_pool`), which reuses a
         block once no array of an earlier result refers to it: ``r = k(x)`` in a loop
         faults in no fresh pages after the second call.  The fastest loop passes the same
@@ -302,6 +305,8 @@ class Kernel:
             keep.append(a)
             c_vals[slot], strides[slot] = a.ctypes.data, a.strides[0]
         out_arrays = self._outputs(out, n, mask is not None, c_vals, strides)
+        if out is not None:
+            mask_arr = self._copy_overwritten(keep, leaf_slots, mask_arr, c_vals, strides, n)
         for i, a in enumerate(self.args):
             if a["kind"] == "buffer":  # held by the pending call until it is done
                 keep.append(c_vals[i])
@@ -398,8 +403,16 @@ class Kernel:
         outs = [(i, a) for i, a in enumerate(self.args) if a["kind"] == "output"]
         out_arrays: dict[str, Any] = {}
         if out is not None:
-            for (i, _), arr in zip(outs, self._out_leaves(out, n)):
+            arrays = self._out_leaves(out, n)
+            for (i, _), arr in zip(outs, arrays):
                 c_vals[i], strides[i] = arr.ctypes.data, arr.strides[0]
+            spans = [Span(c_vals[i], strides[i], arr.itemsize)
+                     for (i, _), arr in zip(outs, arrays)]
+            shared = shared_outputs(spans, arrays, n)
+            if shared is not None:
+                a, b = (outs[j][1]["name"] for j in shared)
+                raise self._err(f"`out` gives results `{a}` and `{b}` the same memory (one "
+                                "would overwrite the other)")
             return out_arrays
         # outputs of one dtype are the rows of one block, in result order: a vector
         # result is then a view (no copy), and consecutive leaves are one contiguous array;
@@ -415,6 +428,25 @@ class Kernel:
             out_arrays[a["name"]] = arr
             c_vals[i], strides[i] = arr.ctypes.data, arr.strides[0]
         return out_arrays
+
+    def _copy_overwritten(self, inputs: list[np.ndarray], slots: list[int],
+                          mask_arr: np.ndarray | None, c_vals: list[Any], strides: list[int],
+                          n: int) -> np.ndarray | None:
+        """Copy the inputs (the mask too) that the ``out=`` arrays in ``c_vals`` would
+        overwrite before another lane reads them (see :mod:`rdsl.runtime.overlap`); return
+        the mask to pass."""
+        outs = [Span(c_vals[i], strides[i], _C_DTYPES[a["dtype"]].itemsize)
+                for i, a in enumerate(self.args) if a["kind"] == "output"]
+        spans = [Span(c_vals[s], strides[s], a.itemsize) for a, s in zip(inputs, slots)]
+        if mask_arr is not None:
+            spans.append(Span(mask_arr.ctypes.data, mask_arr.strides[0], 1))
+        for j in overwritten_inputs(spans, outs, n):
+            if j == len(inputs):
+                mask_arr = mask_arr.copy()
+                continue
+            a = inputs[j] = inputs[j].copy()
+            c_vals[slots[j]], strides[slots[j]] = a.ctypes.data, a.strides[0]
+        return mask_arr
 
     def _run(self, n: int, flat: list[Any], threads: int | None) -> list[Future]:
         """Run over [0, n) with the entry point's arguments ``flat`` (after ``n``): on this
