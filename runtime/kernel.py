@@ -21,6 +21,7 @@ import numpy as np
 
 from .out_pool import OutputPool
 from .overlap import Span, overwritten_inputs, shared_outputs
+from .results import build_result, walk_out
 
 DTYPES = {"f32": np.dtype(np.float32), "i32": np.dtype(np.int32),
           "u32": np.dtype(np.uint32), "u64": np.dtype(np.uint64), "bool": np.dtype(np.bool_)}
@@ -476,7 +477,7 @@ class Kernel:
                         "writeable arrays of its dtypes shaped like one)")
         leaves: list[np.ndarray] = []
         tj = self.result.get("type")
-        if tj is not None and not _out_walk(result, tj, n, leaves):
+        if tj is not None and not walk_out(result, tj, n, leaves):
             raise bad
         names = self.result["leaves"]
         if len(leaves) != len(names):
@@ -497,64 +498,7 @@ class Kernel:
         if tj is None:
             return None
         arrays = iter([out_arrays[name] for name in self.result["leaves"]])
-        return _build(tj, arrays, n)
-
-
-def _build(t: dict[str, Any], arrays: Any, n: int) -> Any:
-    """The result of type ``t`` from the output ``arrays`` (an iterator, in leaf order).
-    A plain function, not a recursive closure: a closure's cycle would keep the arrays
-    alive until the garbage collector runs, and the output pool could not reuse them."""
-    kind = t["kind"]
-    if kind == "scalar":
-        arr = next(arrays)
-        return arr.view(np.bool_) if t["dtype"] == "bool" else arr
-    if kind in ("vec", "mat"):
-        k = t["n"] if kind == "vec" else t["n"] * t["n"]
-        out = _columns([next(arrays) for _ in range(k)], n)
-        return out.reshape(n, t["n"], t["n"]) if kind == "mat" else out
-    if kind == "struct":
-        return {f: _build(ft, arrays, n) for f, ft in t["fields"]}
-    if kind == "tuple":
-        return tuple(_build(e, arrays, n) for e in t["elems"])
-    raise TypeError(t)
-
-
-def _out_walk(v: Any, t: dict[str, Any], n: int, leaves: list[np.ndarray]) -> bool:
-    """Append the leaf arrays of ``v``, an ``out=`` of type ``t`` over ``n`` elements, to
-    ``leaves`` (views, any strides); False where it is not shaped like one."""
-    kind = t["kind"]
-    if kind == "struct":
-        return isinstance(v, dict) and all(f in v and _out_walk(v[f], ft, n, leaves)
-                                           for f, ft in t["fields"])
-    if kind == "tuple":
-        return isinstance(v, tuple) and len(v) == len(t["elems"]) and \
-            all(_out_walk(e, et, n, leaves) for e, et in zip(v, t["elems"]))
-    if not isinstance(v, np.ndarray):
-        return False
-    k = t.get("n", 0)
-    if kind == "vec" and v.shape == (n, k):
-        leaves.extend(v[:, j] for j in range(k))
-    elif kind == "mat" and v.shape == (n, k, k):
-        leaves.extend(v[:, r, c] for r in range(k) for c in range(k))
-    elif kind == "scalar" and v.shape == (n,):
-        leaves.append(v)
-    else:
-        return False
-    return True
-
-
-def _columns(cols: list[np.ndarray], n: int) -> np.ndarray:
-    """``cols`` as the columns of an (n, k) array: a transposed view when they are
-    consecutive rows of one block (as the kernel call allocates them), else a copy."""
-    first = cols[0]
-    step = first.itemsize * n
-    base = first.base
-    if n > 0 and base is not None and all(c.base is base and
-                                c.ctypes.data == first.ctypes.data + j * step
-                                for j, c in enumerate(cols)):
-        row0 = (first.ctypes.data - base.ctypes.data) // step
-        return base[row0:row0 + len(cols)].T
-    return np.stack(cols, axis=1)
+        return build_result(tj, arrays, n)
 
 
 def _leaf_memory(v: Any, dtype: str) -> np.ndarray:
