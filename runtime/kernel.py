@@ -31,6 +31,9 @@ _CTYPES = {"f32": ctypes.c_float, "i32": ctypes.c_int32, "u32": ctypes.c_uint32,
 # numpy dtype kinds accepted for each leaf dtype (anything else is a ValueError)
 _KINDS = {"f32": "fiu", "i32": "iu", "u32": "iu", "u64": "iu", "bool": "biu"}
 _NAMES = {"f32": "float32", "i32": "int32", "u32": "uint32", "u64": "uint64", "bool": "bool"}
+# the values an integer leaf holds: other integers are an error, not wrapped around
+_RANGES = {"i32": (-(1 << 31), (1 << 31) - 1), "u32": (0, (1 << 32) - 1),
+           "u64": (0, (1 << 64) - 1)}
 
 MIN_CHUNK = 4096  # elements per thread-pool task, at least
 CHUNKS_PER_THREAD = 16
@@ -145,16 +148,36 @@ class Kernel:
             if arr.dtype.kind not in _KINDS[dtype]:
                 raise self._err(f"parameter `{path}` {want}, got dtype {arr.dtype}")
             if arr.ndim == 0:
-                return arr.item()
+                return self._scalar(path, arr.item(), dtype, want)
             if arr.ndim != 1:
                 raise self._err(f"parameter `{path}` {want}, got shape {arr.shape}")
+            self._check_range(path, arr, dtype)
             return arr
         return self._scalar(path, value, dtype, want)
+
+    def _check_range(self, path: str, arr: np.ndarray, dtype: str) -> None:
+        """An integer array converted to another integer dtype must hold only values that
+        dtype holds (numpy's astype would wrap them around)."""
+        if dtype not in _RANGES or arr.dtype == DTYPES[dtype] or arr.dtype.kind not in "iu" \
+                or arr.size == 0:
+            return
+        lo, hi = _RANGES[dtype]
+        info = np.iinfo(arr.dtype)
+        if lo <= info.min and info.max <= hi:
+            return  # every value of the array's dtype fits (int16 for an Int)
+        low, high = int(arr.min()), int(arr.max())
+        if low < lo or high > hi:
+            raise self._err(f"parameter `{path}` expects {_NAMES[dtype]} values ({lo}..{hi}), "
+                            f"got {low if low < lo else high} in a {arr.dtype} array")
 
     def _scalar(self, path: str, value: Any, dtype: str, want: str) -> Any:
         if isinstance(value, (bool, np.bool_)):
             ok = dtype in ("bool", "f32") or isinstance(value, numbers.Integral)
         elif isinstance(value, numbers.Integral):
+            lo, hi = _RANGES.get(dtype, (int(value), int(value)))
+            if not lo <= int(value) <= hi:
+                raise self._err(f"parameter `{path}` expects {_NAMES[dtype]} values "
+                                f"({lo}..{hi}), got {value}")
             ok = True
         elif isinstance(value, numbers.Real):
             ok = dtype == "f32"
@@ -182,6 +205,7 @@ class Kernel:
             arr = np.asarray(value)
             if arr.dtype.kind not in _KINDS[dtype]:
                 raise self._err(f"parameter `{path}` {want}, got dtype {arr.dtype}")
+            self._check_range(path, arr, dtype)
             if kind == "mat" and arr.ndim == 3 and arr.shape[1:] == (tj["n"], tj["n"]):
                 out.extend((path, arr[:, r, c]) for r in range(tj["n"]) for c in range(tj["n"]))
                 return

@@ -154,6 +154,30 @@ def test_value_errors(mod):
         mod.count(np.zeros(4, dtype=np.int32), mask=[True, False])
 
 
+
+def test_integers_out_of_range():
+    """An integer an Int or UInt leaf cannot hold (an int64 array's, a uint32 over 2^31, a
+    negative one for a UInt, a Python int) is an error naming the parameter, where numpy's
+    conversion would wrap it around; integers that fit are converted."""
+    m = rdsl.jit("fn mix(a: Int, b: UInt, c: UInt64) -> Int { return a + Int(b) + Int(c); }")
+    one = np.ones(3, np.int32)
+    want = np.array([3, 4, 5], np.int32)
+    np.testing.assert_array_equal(m.mix(np.array([1, 2, 3], np.int64), one, 1), want)
+    np.testing.assert_array_equal(m.mix(np.uint64([1, 2, 3]), np.int64(1), np.int8(1)), want)
+    np.testing.assert_array_equal(m.mix(np.array(1), [1, 2, 3], 1), want)
+    cases = [((np.array([1, 2 ** 40, 3]), one, one), r"`a` expects int32 values "
+              r"\(-2147483648..2147483647\), got 1099511627776 in a int64 array"),
+             ((np.array([2 ** 31], np.uint32), 1, 1), r"`a` expects int32 .* got 2147483648"),
+             ((one, np.array([5, -1, 0]), one), r"`b` expects uint32 values \(0..4294967295\), "
+              r"got -1 in a int64 array"),
+             ((one, one, np.array([0, -3, 0], np.int16)), r"`c` expects uint64 values .* got -3"),
+             ((2 ** 31, one, one), r"`a` expects int32 values .*, got 2147483648$"),
+             ((one, -1, one), r"`b` expects uint32 values .*, got -1$"),
+             ((one, one, np.array(2 ** 64, dtype=object)), r"`c` expects a uint64 array")]
+    for args, message in cases:
+        with pytest.raises(ValueError, match=r"mix\(\): parameter " + message):
+            m.mix(*args)
+
 def test_threads_give_identical_results(mod):
     rng = np.random.default_rng(2)
     n = 100_003
