@@ -37,6 +37,7 @@ _RANGES = {"i32": (-(1 << 31), (1 << 31) - 1), "u32": (0, (1 << 32) - 1),
 
 MIN_CHUNK = 4096  # elements per thread-pool task, at least
 CHUNKS_PER_THREAD = 16
+MAX_THREADS_PER_CORE = 4  # `threads=` above it is cut down to it
 
 # fields a Python caller may leave out of a struct argument, with the value they then take
 # in every lane: a Surface made away from a mesh (stdlib/types.rdsl) is on no triangle
@@ -313,9 +314,16 @@ class Kernel:
         faults in no fresh pages after the second call.  The fastest loop passes the same
         ``out`` every time (no allocation at all, nothing retained by the pool).
 
+        ``threads``: how many threads run a large call (default: one per core; at most
+        ``MAX_THREADS_PER_CORE`` per core).
+
         ``wait=False`` returns a :class:`Pending` at once, while the thread pool runs the
         call: calls queued together share the pool, so one's last tasks overlap the next's
         first (the arrays passed in must not change until ``result()``)."""
+        if threads is not None and (isinstance(threads, bool) or
+                                    not isinstance(threads, numbers.Integral) or threads < 1):
+            raise self._err(f"`threads` expects a number of threads, 1 or more (or None: "
+                            f"every core), got {threads!r}")
         values = self._bind(args, kwargs)
         c_vals: list[Any] = [None] * len(self.args)
         strides: list[int] = [0] * len(self.args)
@@ -479,7 +487,10 @@ class Kernel:
         for)."""
         if n <= 0:
             return []
-        threads = (os.cpu_count() or 1) if threads is None else max(1, int(threads))
+        threads = (os.cpu_count() or 1) if threads is None else threads
+        # a few threads per core at most: `threads=10**6` would start a thread for every
+        # few vectors of work (and its pool would keep them all)
+        threads = min(threads, MAX_THREADS_PER_CORE * (os.cpu_count() or 1))
         if threads == 1 or n < 2 * MIN_CHUNK:
             self._fn(n, *flat)
             return []

@@ -191,6 +191,28 @@ def test_threads_give_identical_results(mod):
                                   mod.lerp(wo[:, 0], wo[:, 1], wo[:, 2], threads=1))
 
 
+
+def test_threads_argument(mod):
+    """``threads=`` is a number of threads, 1 or more: 0, -1, 2.5 or "2" are an error, and a
+    huge count runs on a few threads per core (it started a thread per few vectors)."""
+    import os
+    import threading
+
+    from rdsl.runtime import kernel
+
+    x = np.linspace(-1, 1, 100_003, dtype=np.float32)
+    for bad in (0, -1, 2.5, "2", True):
+        with pytest.raises(ValueError, match=r"lerp\(\): `threads` expects a number of "
+                                             r"threads, 1 or more \(or None: every core\), "
+                                             f"got {bad!r}"):
+            mod.lerp(x, x, x, threads=bad)
+    before = threading.active_count()
+    cap = kernel.MAX_THREADS_PER_CORE * (os.cpu_count() or 1)
+    np.testing.assert_array_equal(mod.lerp(x, 2 * x, 0.5, threads=10 ** 6),
+                                  mod.lerp(x, 2 * x, 0.5, threads=1))
+    assert threading.active_count() <= before + cap
+    assert 10 ** 6 not in kernel._POOLS
+
 def test_out_reuses_a_result(mod):
     rng = np.random.default_rng(3)
     n = 37
