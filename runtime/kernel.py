@@ -392,6 +392,9 @@ class Kernel:
                 continue
             if p["uniform"]:
                 value = values.get(name, p.get("default"))
+                if value is None and p.get("default") is not None:
+                    raise self._err(f"uniform parameter `{name}` got None (leave it out for "
+                                    f"its default, {p['default']!r})")
                 if value is None:
                     raise self._err(f"missing value for uniform parameter `{name}` "
                                     "(it has no default)")

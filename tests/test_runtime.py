@@ -150,6 +150,9 @@ def test_value_errors(mod):
         mod["bsdf.shade"]({"p": np.zeros((4, 3)), "t": np.zeros(4)}, np.zeros((4, 3)))
     with pytest.raises(ValueError, match=r"parameter `color` expects 3 values, got 2"):
         mod["bsdf.shade"](_surf(4, rng), np.zeros((4, 3)), color=(1, 2))
+    with pytest.raises(ValueError, match=r"uniform parameter `alpha` got None \(leave it out "
+                                         r"for its default, 0.5\)"):
+        mod["bsdf.shade"](_surf(4, rng), np.zeros((4, 3)), alpha=None)
     with pytest.raises(ValueError, match=r"`mask` has 2 elements, expected 4"):
         mod.count(np.zeros(4, dtype=np.int32), mask=[True, False])
 
