@@ -20,6 +20,8 @@ from typing import Any
 import numpy as np
 
 from .out_pool import OutputPool
+from .overlap import Span, overwritten_inputs, shared_outputs
+from .results import build_result, walk_out
 
 DTYPES = {"f32": np.dtype(np.float32), "i32": np.dtype(np.int32),
           "u32": np.dtype(np.uint32), "u64": np.dtype(np.uint64), "bool": np.dtype(np.bool_)}
@@ -29,9 +31,13 @@ _CTYPES = {"f32": ctypes.c_float, "i32": ctypes.c_int32, "u32": ctypes.c_uint32,
 # numpy dtype kinds accepted for each leaf dtype (anything else is a ValueError)
 _KINDS = {"f32": "fiu", "i32": "iu", "u32": "iu", "u64": "iu", "bool": "biu"}
 _NAMES = {"f32": "float32", "i32": "int32", "u32": "uint32", "u64": "uint64", "bool": "bool"}
+# the values an integer leaf holds: other integers are an error, not wrapped around
+_RANGES = {"i32": (-(1 << 31), (1 << 31) - 1), "u32": (0, (1 << 32) - 1),
+           "u64": (0, (1 << 64) - 1)}
 
 MIN_CHUNK = 4096  # elements per thread-pool task, at least
 CHUNKS_PER_THREAD = 16
+MAX_THREADS_PER_CORE = 4  # `threads=` above it is cut down to it
 
 # fields a Python caller may leave out of a struct argument, with the value they then take
 # in every lane: a Surface made away from a mesh (stdlib/types.rdsl) is on no triangle
@@ -143,16 +149,36 @@ class Kernel:
             if arr.dtype.kind not in _KINDS[dtype]:
                 raise self._err(f"parameter `{path}` {want}, got dtype {arr.dtype}")
             if arr.ndim == 0:
-                return arr.item()
+                return self._scalar(path, arr.item(), dtype, want)
             if arr.ndim != 1:
                 raise self._err(f"parameter `{path}` {want}, got shape {arr.shape}")
+            self._check_range(path, arr, dtype)
             return arr
         return self._scalar(path, value, dtype, want)
+
+    def _check_range(self, path: str, arr: np.ndarray, dtype: str) -> None:
+        """An integer array converted to another integer dtype must hold only values that
+        dtype holds (numpy's astype would wrap them around)."""
+        if dtype not in _RANGES or arr.dtype == DTYPES[dtype] or arr.dtype.kind not in "iu" \
+                or arr.size == 0:
+            return
+        lo, hi = _RANGES[dtype]
+        info = np.iinfo(arr.dtype)
+        if lo <= info.min and info.max <= hi:
+            return  # every value of the array's dtype fits (int16 for an Int)
+        low, high = int(arr.min()), int(arr.max())
+        if low < lo or high > hi:
+            raise self._err(f"parameter `{path}` expects {_NAMES[dtype]} values ({lo}..{hi}), "
+                            f"got {low if low < lo else high} in a {arr.dtype} array")
 
     def _scalar(self, path: str, value: Any, dtype: str, want: str) -> Any:
         if isinstance(value, (bool, np.bool_)):
             ok = dtype in ("bool", "f32") or isinstance(value, numbers.Integral)
         elif isinstance(value, numbers.Integral):
+            lo, hi = _RANGES.get(dtype, (int(value), int(value)))
+            if not lo <= int(value) <= hi:
+                raise self._err(f"parameter `{path}` expects {_NAMES[dtype]} values "
+                                f"({lo}..{hi}), got {value}")
             ok = True
         elif isinstance(value, numbers.Real):
             ok = dtype == "f32"
@@ -180,6 +206,7 @@ class Kernel:
             arr = np.asarray(value)
             if arr.dtype.kind not in _KINDS[dtype]:
                 raise self._err(f"parameter `{path}` {want}, got dtype {arr.dtype}")
+            self._check_range(path, arr, dtype)
             if kind == "mat" and arr.ndim == 3 and arr.shape[1:] == (tj["n"], tj["n"]):
                 out.extend((path, arr[:, r, c]) for r in range(tj["n"]) for c in range(tj["n"]))
                 return
@@ -279,15 +306,24 @@ class Kernel:
         ``out``: arrays shaped like the result (the result of an earlier call over as many
         elements, or arrays of the caller's own, in any layout: a C-order ``(N, 4)`` array,
         columns of a record array); the kernel writes into them (lanes outside ``mask`` keep
-        their old values) and returns ``out``.  Without ``out``, large results are written
+        their old values) and returns ``out``.  ``out`` may be an input itself (``out=x``);
+        an input (or mask) in memory that ``out`` overwrites for another element is copied
+        first, as numpy's ufuncs do.  Without ``out``, large results are written
         into blocks of ``self.pool`` (see :mod:`rdsl.runtime.out_pool`), which reuses a
         block once no array of an earlier result refers to it: ``r = k(x)`` in a loop
         faults in no fresh pages after the second call.  The fastest loop passes the same
         ``out`` every time (no allocation at all, nothing retained by the pool).
 
+        ``threads``: how many threads run a large call (default: one per core; at most
+        ``MAX_THREADS_PER_CORE`` per core).
+
         ``wait=False`` returns a :class:`Pending` at once, while the thread pool runs the
         call: calls queued together share the pool, so one's last tasks overlap the next's
         first (the arrays passed in must not change until ``result()``)."""
+        if threads is not None and (isinstance(threads, bool) or
+                                    not isinstance(threads, numbers.Integral) or threads < 1):
+            raise self._err(f"`threads` expects a number of threads, 1 or more (or None: "
+                            f"every core), got {threads!r}")
         values = self._bind(args, kwargs)
         c_vals: list[Any] = [None] * len(self.args)
         strides: list[int] = [0] * len(self.args)
@@ -302,6 +338,8 @@ class Kernel:
             keep.append(a)
             c_vals[slot], strides[slot] = a.ctypes.data, a.strides[0]
         out_arrays = self._outputs(out, n, mask is not None, c_vals, strides)
+        if out is not None:
+            mask_arr = self._copy_overwritten(keep, leaf_slots, mask_arr, c_vals, strides, n)
         for i, a in enumerate(self.args):
             if a["kind"] == "buffer":  # held by the pending call until it is done
                 keep.append(c_vals[i])
@@ -354,6 +392,9 @@ class Kernel:
                 continue
             if p["uniform"]:
                 value = values.get(name, p.get("default"))
+                if value is None and p.get("default") is not None:
+                    raise self._err(f"uniform parameter `{name}` got None (leave it out for "
+                                    f"its default, {p['default']!r})")
                 if value is None:
                     raise self._err(f"missing value for uniform parameter `{name}` "
                                     "(it has no default)")
@@ -398,8 +439,16 @@ class Kernel:
         outs = [(i, a) for i, a in enumerate(self.args) if a["kind"] == "output"]
         out_arrays: dict[str, Any] = {}
         if out is not None:
-            for (i, _), arr in zip(outs, self._out_leaves(out, n)):
+            arrays = self._out_leaves(out, n)
+            for (i, _), arr in zip(outs, arrays):
                 c_vals[i], strides[i] = arr.ctypes.data, arr.strides[0]
+            spans = [Span(c_vals[i], strides[i], arr.itemsize)
+                     for (i, _), arr in zip(outs, arrays)]
+            shared = shared_outputs(spans, arrays, n)
+            if shared is not None:
+                a, b = (outs[j][1]["name"] for j in shared)
+                raise self._err(f"`out` gives results `{a}` and `{b}` the same memory (one "
+                                "would overwrite the other)")
             return out_arrays
         # outputs of one dtype are the rows of one block, in result order: a vector
         # result is then a view (no copy), and consecutive leaves are one contiguous array;
@@ -416,13 +465,35 @@ class Kernel:
             c_vals[i], strides[i] = arr.ctypes.data, arr.strides[0]
         return out_arrays
 
+    def _copy_overwritten(self, inputs: list[np.ndarray], slots: list[int],
+                          mask_arr: np.ndarray | None, c_vals: list[Any], strides: list[int],
+                          n: int) -> np.ndarray | None:
+        """Copy the inputs (the mask too) that the ``out=`` arrays in ``c_vals`` would
+        overwrite before another lane reads them (see :mod:`rdsl.runtime.overlap`); return
+        the mask to pass."""
+        outs = [Span(c_vals[i], strides[i], _C_DTYPES[a["dtype"]].itemsize)
+                for i, a in enumerate(self.args) if a["kind"] == "output"]
+        spans = [Span(c_vals[s], strides[s], a.itemsize) for a, s in zip(inputs, slots)]
+        if mask_arr is not None:
+            spans.append(Span(mask_arr.ctypes.data, mask_arr.strides[0], 1))
+        for j in overwritten_inputs(spans, outs, n):
+            if j == len(inputs):
+                mask_arr = mask_arr.copy()
+                continue
+            a = inputs[j] = inputs[j].copy()
+            c_vals[slots[j]], strides[slots[j]] = a.ctypes.data, a.strides[0]
+        return mask_arr
+
     def _run(self, n: int, flat: list[Any], threads: int | None) -> list[Future]:
         """Run over [0, n) with the entry point's arguments ``flat`` (after ``n``): on this
         thread, or as tasks of the thread pool (their futures are returned, not waited
         for)."""
         if n <= 0:
             return []
-        threads = (os.cpu_count() or 1) if threads is None else max(1, int(threads))
+        threads = (os.cpu_count() or 1) if threads is None else threads
+        # a few threads per core at most: `threads=10**6` would start a thread for every
+        # few vectors of work (and its pool would keep them all)
+        threads = min(threads, MAX_THREADS_PER_CORE * (os.cpu_count() or 1))
         if threads == 1 or n < 2 * MIN_CHUNK:
             self._fn(n, *flat)
             return []
@@ -444,7 +515,7 @@ class Kernel:
                         "writeable arrays of its dtypes shaped like one)")
         leaves: list[np.ndarray] = []
         tj = self.result.get("type")
-        if tj is not None and not _out_walk(result, tj, n, leaves):
+        if tj is not None and not walk_out(result, tj, n, leaves):
             raise bad
         names = self.result["leaves"]
         if len(leaves) != len(names):
@@ -465,64 +536,7 @@ class Kernel:
         if tj is None:
             return None
         arrays = iter([out_arrays[name] for name in self.result["leaves"]])
-        return _build(tj, arrays, n)
-
-
-def _build(t: dict[str, Any], arrays: Any, n: int) -> Any:
-    """The result of type ``t`` from the output ``arrays`` (an iterator, in leaf order).
-    A plain function, not a recursive closure: a closure's cycle would keep the arrays
-    alive until the garbage collector runs, and the output pool could not reuse them."""
-    kind = t["kind"]
-    if kind == "scalar":
-        arr = next(arrays)
-        return arr.view(np.bool_) if t["dtype"] == "bool" else arr
-    if kind in ("vec", "mat"):
-        k = t["n"] if kind == "vec" else t["n"] * t["n"]
-        out = _columns([next(arrays) for _ in range(k)], n)
-        return out.reshape(n, t["n"], t["n"]) if kind == "mat" else out
-    if kind == "struct":
-        return {f: _build(ft, arrays, n) for f, ft in t["fields"]}
-    if kind == "tuple":
-        return tuple(_build(e, arrays, n) for e in t["elems"])
-    raise TypeError(t)
-
-
-def _out_walk(v: Any, t: dict[str, Any], n: int, leaves: list[np.ndarray]) -> bool:
-    """Append the leaf arrays of ``v``, an ``out=`` of type ``t`` over ``n`` elements, to
-    ``leaves`` (views, any strides); False where it is not shaped like one."""
-    kind = t["kind"]
-    if kind == "struct":
-        return isinstance(v, dict) and all(f in v and _out_walk(v[f], ft, n, leaves)
-                                           for f, ft in t["fields"])
-    if kind == "tuple":
-        return isinstance(v, tuple) and len(v) == len(t["elems"]) and \
-            all(_out_walk(e, et, n, leaves) for e, et in zip(v, t["elems"]))
-    if not isinstance(v, np.ndarray):
-        return False
-    k = t.get("n", 0)
-    if kind == "vec" and v.shape == (n, k):
-        leaves.extend(v[:, j] for j in range(k))
-    elif kind == "mat" and v.shape == (n, k, k):
-        leaves.extend(v[:, r, c] for r in range(k) for c in range(k))
-    elif kind == "scalar" and v.shape == (n,):
-        leaves.append(v)
-    else:
-        return False
-    return True
-
-
-def _columns(cols: list[np.ndarray], n: int) -> np.ndarray:
-    """``cols`` as the columns of an (n, k) array: a transposed view when they are
-    consecutive rows of one block (as the kernel call allocates them), else a copy."""
-    first = cols[0]
-    step = first.itemsize * n
-    base = first.base
-    if base is not None and all(c.base is base and
-                                c.ctypes.data == first.ctypes.data + j * step
-                                for j, c in enumerate(cols)):
-        row0 = (first.ctypes.data - base.ctypes.data) // step
-        return base[row0:row0 + len(cols)].T
-    return np.stack(cols, axis=1)
+        return build_result(tj, arrays, n)
 
 
 def _leaf_memory(v: Any, dtype: str) -> np.ndarray:

@@ -186,7 +186,9 @@ class ClKernel(Kernel):
         values = self._bind(args, kwargs)
         vals: list[Any] = [None] * len(self.args)
         leaves, slots = self._convert_params(values, vals)
-        n = self._length(leaves, mask) or 1
+        n = self._length(leaves, mask)
+        if n is None:  # scalars only: one element
+            n = 1
         for (_path, v), slot in zip(leaves, slots):
             vals[slot] = v
         masked = mask is not None
@@ -233,6 +235,9 @@ class ClKernel(Kernel):
         uniform, the numpy array of a buffer (updated in place) or a
         :class:`DeviceBuffer`; ``outs``: the output
         arrays in order (1-D, any stride; bools as uint8)."""
+        if n == 0:  # nothing to run (and a buffer cannot be mapped over no bytes)
+            self.last_device_seconds = 0.0
+            return
         cl = self._cl
         queue = opencl_context()[1]
         items = -(-n // self.width)  # work-items: W elements each

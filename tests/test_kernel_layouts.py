@@ -253,3 +253,43 @@ def test_out_vectors_interleaved(target: str) -> None:
             for o, b, w in zip(out, before, want):
                 np.testing.assert_array_equal(_bits(o[~on]), _bits(b[~on]))
                 np.testing.assert_array_equal(_bits(o[on]), _bits(w[on]))
+
+
+
+def _overlapping_outs(n: int, p: np.ndarray) -> dict[str, tuple]:
+    """``out=`` arrays for split over the memory of its input ``p`` (rows ``[0, n)`` of an
+    (n + 1, 3) array): lane i's results written where other lanes read their inputs
+    (reversed, one row on), or where only lane i reads (in place, its row's columns)."""
+    vec2 = np.zeros((n, 2), np.float32)
+    return {"reversed": (p[::-1], vec2, np.zeros((n, 3), np.float32)),
+            "next_row": (np.zeros((n, 3), np.float32), vec2, p.base[1:]),
+            "in_place": (p, vec2, np.zeros((n, 3), np.float32)),
+            "own_row": (p[:, ::-1], vec2, np.zeros((n, 3), np.float32))}
+
+
+@pytest.mark.parametrize("target", runnable_targets())
+def test_out_over_the_inputs(target: str) -> None:
+    """An ``out=`` array over the memory of an input (the mask too) gives the results of the
+    call with separate arrays, as numpy's ufuncs do: where another lane would read what lane
+    i wrote, the input is copied first.  Two results in the same memory are an error."""
+    k = rdsl.jit(GROUPED, target=target)["split"]
+    positive = rdsl.jit("fn positive(x: Float) -> Bool { return x > 0.0; }",
+                        target=target)["positive"]
+    for n in SIZES:
+        d = _data(n)
+        want = k(d["p"], d["s"], threads=2)
+        for layout in _overlapping_outs(n, np.zeros((n + 1, 3), np.float32)[:-1]):
+            p = np.zeros((n + 1, 3), np.float32)[:-1]
+            p[...] = d["p"]
+            out = _overlapping_outs(n, p)[layout]
+            got = k(p, d["s"], out=out, threads=2)
+            assert got is out
+            for g, w in zip(got, want):
+                np.testing.assert_array_equal(_bits(g), _bits(w), err_msg=layout)
+        on = d["mask"].copy()
+        got = positive(d["s"], mask=on, out=on[::-1], threads=2)
+        np.testing.assert_array_equal(got, np.where(d["mask"], d["s"] > 0, d["mask"][::-1]))
+    p, s, vec3 = d["p"], d["s"], np.zeros((n, 3), np.float32)
+    with pytest.raises(ValueError, match=r"split\(\): `out` gives results `ret.0.x` and "
+                                         r"`ret.2.x` the same memory"):
+        k(p, s, out=(vec3, np.zeros((n, 2), np.float32), vec3))

@@ -146,6 +146,17 @@ def test_struct_results():
     assert np.any(got["pdf"] > 0)
 
 
+
+def test_zero_elements():
+    """A call over no elements returns empty results (it ran one element over empty
+    arrays, and pyopencl failed to map a buffer of no bytes)."""
+    k = rdsl.jit(GGX, target="opencl", width=8)["ggx_eval_sample"]
+    wi, u1, u2 = _ggx_inputs(0, seed=3)
+    want = rdsl.jit(GGX, target=REF)["ggx_eval_sample"](wi, u1, u2, 0.3)
+    assert want.shape == (0, 4)
+    for got in (k(wi, u1, u2, 0.3), k(wi, u1, u2, 0.3, mask=np.zeros(0, bool))):
+        assert got.shape == (0, 4) and got.dtype == np.float32
+
 def test_cli_writes_and_loads(tmp_path: Path):
     src = tmp_path / "shade.rdsl"
     src.write_text(HOST_SRC)

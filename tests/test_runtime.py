@@ -150,9 +150,36 @@ def test_value_errors(mod):
         mod["bsdf.shade"]({"p": np.zeros((4, 3)), "t": np.zeros(4)}, np.zeros((4, 3)))
     with pytest.raises(ValueError, match=r"parameter `color` expects 3 values, got 2"):
         mod["bsdf.shade"](_surf(4, rng), np.zeros((4, 3)), color=(1, 2))
+    with pytest.raises(ValueError, match=r"uniform parameter `alpha` got None \(leave it out "
+                                         r"for its default, 0.5\)"):
+        mod["bsdf.shade"](_surf(4, rng), np.zeros((4, 3)), alpha=None)
     with pytest.raises(ValueError, match=r"`mask` has 2 elements, expected 4"):
         mod.count(np.zeros(4, dtype=np.int32), mask=[True, False])
 
+
+
+def test_integers_out_of_range():
+    """An integer an Int or UInt leaf cannot hold (an int64 array's, a uint32 over 2^31, a
+    negative one for a UInt, a Python int) is an error naming the parameter, where numpy's
+    conversion would wrap it around; integers that fit are converted."""
+    m = rdsl.jit("fn mix(a: Int, b: UInt, c: UInt64) -> Int { return a + Int(b) + Int(c); }")
+    one = np.ones(3, np.int32)
+    want = np.array([3, 4, 5], np.int32)
+    np.testing.assert_array_equal(m.mix(np.array([1, 2, 3], np.int64), one, 1), want)
+    np.testing.assert_array_equal(m.mix(np.uint64([1, 2, 3]), np.int64(1), np.int8(1)), want)
+    np.testing.assert_array_equal(m.mix(np.array(1), [1, 2, 3], 1), want)
+    cases = [((np.array([1, 2 ** 40, 3]), one, one), r"`a` expects int32 values "
+              r"\(-2147483648..2147483647\), got 1099511627776 in a int64 array"),
+             ((np.array([2 ** 31], np.uint32), 1, 1), r"`a` expects int32 .* got 2147483648"),
+             ((one, np.array([5, -1, 0]), one), r"`b` expects uint32 values \(0..4294967295\), "
+              r"got -1 in a int64 array"),
+             ((one, one, np.array([0, -3, 0], np.int16)), r"`c` expects uint64 values .* got -3"),
+             ((2 ** 31, one, one), r"`a` expects int32 values .*, got 2147483648$"),
+             ((one, -1, one), r"`b` expects uint32 values .*, got -1$"),
+             ((one, one, np.array(2 ** 64, dtype=object)), r"`c` expects a uint64 array")]
+    for args, message in cases:
+        with pytest.raises(ValueError, match=r"mix\(\): parameter " + message):
+            m.mix(*args)
 
 def test_threads_give_identical_results(mod):
     rng = np.random.default_rng(2)
@@ -166,6 +193,28 @@ def test_threads_give_identical_results(mod):
     np.testing.assert_array_equal(mod.lerp(wo[:, 0], wo[:, 1], wo[:, 2], threads=3),
                                   mod.lerp(wo[:, 0], wo[:, 1], wo[:, 2], threads=1))
 
+
+
+def test_threads_argument(mod):
+    """``threads=`` is a number of threads, 1 or more: 0, -1, 2.5 or "2" are an error, and a
+    huge count runs on a few threads per core (it started a thread per few vectors)."""
+    import os
+    import threading
+
+    from rdsl.runtime import kernel
+
+    x = np.linspace(-1, 1, 100_003, dtype=np.float32)
+    for bad in (0, -1, 2.5, "2", True):
+        with pytest.raises(ValueError, match=r"lerp\(\): `threads` expects a number of "
+                                             r"threads, 1 or more \(or None: every core\), "
+                                             f"got {bad!r}"):
+            mod.lerp(x, x, x, threads=bad)
+    before = threading.active_count()
+    cap = kernel.MAX_THREADS_PER_CORE * (os.cpu_count() or 1)
+    np.testing.assert_array_equal(mod.lerp(x, 2 * x, 0.5, threads=10 ** 6),
+                                  mod.lerp(x, 2 * x, 0.5, threads=1))
+    assert threading.active_count() <= before + cap
+    assert 10 ** 6 not in kernel._POOLS
 
 def test_out_reuses_a_result(mod):
     rng = np.random.default_rng(3)
@@ -184,6 +233,20 @@ def test_out_reuses_a_result(mod):
     with pytest.raises(ValueError, match=r"`out` is not a result of this kernel over 5 "):
         mod["bsdf.shade"](_surf(5, rng), np.zeros((5, 3)), out=first)
 
+
+
+def test_zero_elements(mod):
+    """A call over no elements returns empty results of the right shapes (vectors (0, k)),
+    masked or into an empty ``out=``, rather than failing while it builds them."""
+    rng = np.random.default_rng(5)
+    si, wo = _surf(0, rng), np.zeros((0, 3), np.float32)
+    for res in (mod["bsdf.shade"](si, wo), mod["bsdf.shade"](si, wo, mask=np.zeros(0, bool))):
+        assert res["value"].shape == (0, 3) and res["value"].dtype == np.float32
+        assert res["pdf"].shape == (0,)
+    out = {"value": np.zeros((0, 3), np.float32), "pdf": np.zeros(0, np.float32)}
+    assert mod["bsdf.shade"](si, wo, out=out) is out
+    twice, any_ = mod.count(np.zeros(0, np.int32))
+    assert twice.shape == (0,) and any_.shape == (0,)
 
 def test_fresh_results_reuse_only_released_blocks(mod):
     """Large fresh results come from the kernel's output pool: a block is written again only
