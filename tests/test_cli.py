@@ -141,3 +141,15 @@ def test_never_overwrites_input(tmp_path: Path):
 
 def test_missing_file(tmp_path: Path):
     assert_user_error(rdsl("check", str(tmp_path / "nope.rdsl")), "no such file")
+
+
+@pytest.mark.parametrize("command", ["render", "bench"])
+@pytest.mark.parametrize("threads", ["0", "-2", "two"])
+def test_thread_count_is_checked(command: str, threads: str, tmp_path: Path):
+    """``--threads`` below 1 or not a number is a usage error naming the value, before any
+    scene is read (the kernel call refuses it with a traceback's ValueError)."""
+    r = rdsl(command, str(tmp_path / "missing.xml"), "--threads", threads)
+    assert r.returncode == 2
+    assert "Traceback" not in r.stderr
+    assert f"argument --threads: expected a number of threads, 1 or more, got `{threads}`" \
+        in r.stderr

@@ -28,6 +28,7 @@ from typing import Any
 import numpy as np
 
 from ...compiler.diagnostics import CompileError
+from .cli import thread_count
 
 LIBLLVM = Path("/usr/lib/x86_64-linux-gnu/libLLVM.so.19.1")
 REF_FACTOR = 16  # the reference's spp: this times the largest spp measured
@@ -100,7 +101,7 @@ def add_commands(sub: argparse._SubParsersAction) -> dict[str, Callable[[Any], i
                    help="instead of --spp: 1, 2, 4, ... spp until a render takes S seconds")
     b.add_argument("--repeat", type=int, default=1,
                    help="timed runs per point after a warm-up, the median kept (default 1)")
-    b.add_argument("--threads", type=int, default=None, help="default: all cores")
+    b.add_argument("--threads", type=thread_count, default=None, help="default: all cores")
     b.add_argument("-D", dest="defines", action="append", default=[], metavar="NAME=VALUE",
                    help="set a scene parameter declared with <default>")
     b.add_argument("-o", "--output", default=None, metavar="PLOT.png",

@@ -19,6 +19,17 @@ from .image import write_render
 from .progress import summary_line
 
 
+def thread_count(text: str) -> int:
+    """``--threads``: a whole number of threads, 1 or more (argparse prints the message)."""
+    try:
+        n = int(text)
+    except ValueError:
+        n = 0
+    if n < 1:
+        raise argparse.ArgumentTypeError(f"expected a number of threads, 1 or more, got `{text}`")
+    return n
+
+
 def add_commands(sub: argparse._SubParsersAction) -> dict[str, Callable[[Any], int]]:
     """Add ``render`` to ``sub``; returns its handler by name."""
     r = sub.add_parser("render", help="render a Mitsuba 3 XML scene")
@@ -32,7 +43,7 @@ def add_commands(sub: argparse._SubParsersAction) -> dict[str, Callable[[Any], i
     r.add_argument("--target", default="host")
     r.add_argument("--variant", default="rgb",
                    help=", ".join(VARIANTS) + " (default: rgb)")
-    r.add_argument("--threads", type=int, default=None, help="default: all cores")
+    r.add_argument("--threads", type=thread_count, default=None, help="default: all cores")
     r.add_argument("-D", dest="defines", action="append", default=[], metavar="NAME=VALUE",
                    help="set a scene parameter declared with <default>")
     r.add_argument("--report", action="store_true",
