@@ -214,6 +214,49 @@ def test_missing_interface_function_is_a_diagnostic_at_the_plugin(tmp_path):
         str(e.value)
 
 
+STRIPES = """texture stripes {
+    param count: Int = 4;
+    fn on(si: Surface) -> Bool { return si.uv.x * Float(count) - floor(si.uv.x * Float(count)) < 0.5; }
+    fn eval(si: Surface) -> Spectrum { return Spectrum(select(on(si), 0.8, 0.2)); }
+    fn eval_1(si: Surface) -> Float { return select(on(si), 0.8, 0.2); }
+}
+"""
+
+
+@pytest.mark.parametrize("kind, old, new, found", [
+    # a texture's eval_1 giving a colour: once an internal error (`mul` on mismatched
+    # aggregates) where the texture set a Float parameter
+    ("texture", "fn eval_1(si: Surface) -> Float { return select(on(si), 0.8, 0.2); }",
+     "fn eval_1(si: Surface) -> Spectrum { return Spectrum(0.5); }",
+     "found `eval_1(Surface) -> Spectrum`"),
+    # one more parameter: once "parameter `k` of `stripes` has no value", with no file
+    ("texture", "fn eval_1(si: Surface) -> Float", "fn eval_1(si: Surface, k: Float) -> Float",
+     "found `eval_1(Surface, Float) -> Float`"),
+    ("bsdf", "fn albedo_two_sided() -> Bool { return true; }",
+     "fn albedo_two_sided() -> Float { return 1.0; }", "found `albedo_two_sided() -> Float`"),
+    ("bsdf", "fn albedo_two_sided() -> Bool { return true; }",
+     "fn disperses(x: Float) -> Bool { return x > 0.5; }", "found `disperses(Float) -> Bool`"),
+], ids=["eval_1-colour", "eval_1-two-args", "albedo_two_sided-float", "disperses-arg"])
+def test_optional_interface_function_with_a_wrong_signature(tmp_path, kind, old, new, found):
+    """An optional function of an interface (a texture's `eval_1`, a BSDF's `disperses`...)
+    that the plugin defines must have the interface's signature: a diagnostic at its line."""
+    base = STRIPES if kind == "texture" else renamed("bsdf/diffuse.rdsl", "diffuse", "mine")
+    assert old in base
+    src = base.replace(old, new)
+    name = "stripes" if kind == "texture" else "mine"
+    (tmp_path / f"{name}.rdsl").write_text(src)
+    bsdf = ('<bsdf type="roughconductor"><texture type="stripes" name="alpha"/></bsdf>'
+            if kind == "texture" else '<bsdf type="mine"/>')
+    with pytest.raises(CompileError) as e:
+        load_scene_description(scene(tmp_path, bsdf))
+    mname = new.split("(")[0].split()[-1]
+    line = next(i for i, t in enumerate(src.splitlines(), 1) if f"fn {mname}(" in t)
+    text = str(e.value)
+    assert f"{name}.rdsl:{line}:" in text, text
+    assert f"`{name}.{mname}` has the wrong signature: expected `fn {mname}(" in text, text
+    assert found in text, text
+
+
 def _param_line(path: Path, name: str) -> int:
     return next(i for i, t in enumerate(path.read_text().splitlines(), 1)
                 if re.match(rf"\s*param {name}\b", t))
