@@ -280,6 +280,24 @@ def test_wrong_parameter_type_names_xml_line_and_declaration(tmp_path):
     assert "`param sigma: Float`" in text
 
 
+def test_negative_integer_for_an_unsigned_param_is_an_error(tmp_path):
+    """A `UInt` param given a negative <integer> (once taken, wrapped to 2^32 - 3)."""
+    (tmp_path / "seeded.rdsl").write_text(
+        "texture seeded {\n    param seed: UInt = 1u;\n"
+        "    fn eval(si: Surface) -> Spectrum { return Spectrum(Float(seed % 7u) * 0.1); }\n}\n")
+    ok = scene(tmp_path, '<bsdf type="diffuse"><texture type="seeded" name="reflectance">'
+               '<integer name="seed" value="3"/></texture></bsdf>')
+    load_scene_description(ok)
+    path = scene(tmp_path, '<bsdf type="diffuse"><texture type="seeded" name="reflectance">'
+                 '<integer name="seed" value="-3"/></texture></bsdf>', "bad.xml")
+    with pytest.raises(SceneError) as e:
+        load_scene_description(path)
+    text = str(e.value)
+    assert text.startswith(f"{path}:3:"), text
+    assert "parameter 'seed' of texture 'seeded'" in text and "cannot be -3" in text, text
+    assert f"`param seed: UInt` at {tmp_path / 'seeded.rdsl'}:2" in text, text
+
+
 def test_unknown_and_string_properties_are_errors(tmp_path):
     (tmp_path / "orennayar.rdsl").write_text((EXAMPLES / "orennayar.rdsl").read_text())
     path = scene(tmp_path, '<bsdf type="orennayar">\n    <float name="roughness" value="1"/>'

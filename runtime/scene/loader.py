@@ -322,6 +322,9 @@ class _Builder(ShapeFinisher, Finishers):
                               f"{KIND_NAMES[p.kind]}, got {got}{_declared(name, p)}", loc)
         if kind == "texture":
             return self.instantiate(value)
+        if p.rdsl_type in ("UInt", "UInt64") and value < 0:
+            raise scene_error(f"parameter '{name}' of {self.what(node)} is unsigned, so it "
+                              f"cannot be {value}{_declared(name, p)}", loc)
         if p.kind == "float":
             return float(value)
         if p.kind == "vec3":
