@@ -411,12 +411,15 @@ def scene_spec(registry: PluginRegistry, category: str, ptype: str) -> Any:
     if schema is not None and std is None:  # e.g. the `point` emitter: functions, no plugin
         f = STDLIB / category / f"{ptype}.rdsl"
         builtin = str(f) if f.is_file() else f"the built-in {category} `{ptype}`"
+    if (schema is not None and schema.children) or ptype in INTERNAL:
+        # a combinator's name cannot be taken (an error, so no warning that it is shadowed)
+        user = next((d for d in registry.candidates(category, ptype) if not d.stdlib), None)
+        if user is not None:
+            raise CompileError(f"`{ptype}` is the name of one of rdsl's built-in {category} "
+                               "combinators; rename this plugin", Loc(str(user.path), user.line,
+                                                                      1))
     decl = registry.lookup(category, ptype, builtin)
     if decl is not None and not decl.stdlib:
-        if (schema is not None and schema.children) or ptype in INTERNAL:
-            raise CompileError(f"`{ptype}` is the name of one of rdsl's built-in {category} "
-                               "combinators; rename this plugin", Loc(str(decl.path), decl.line,
-                                                                      1))
         return declared_spec(decl)
     if schema is not None:
         return schema

@@ -152,6 +152,59 @@ def test_shadowing_a_stdlib_plugin_warns_naming_both_files(tmp_path):
     assert desc.shapes[0].bsdf.decl is not None  # its own params, not Mitsuba's
 
 
+def test_cli_prints_the_shadowing_warning_once_as_warning(tmp_path, capsys):
+    """`rdsl render` prints the shadowing warning as docs/plugins.md shows it, `file:line:
+    warning: ...` (it printed `warning: file:line: warning: ...`)."""
+    from rdsl.cli import main
+
+    src = (STDLIB / "bsdf" / "diffuse.rdsl").read_text()
+    path = cbox_with(tmp_path / "s")
+    (tmp_path / "s" / "diffuse.rdsl").write_text(src)
+    assert main(["render", str(path), "--spp", "1", "-D", "res=4", "--quiet",
+                 "-o", str(tmp_path / "o.exr")]) == 0
+    err = capsys.readouterr().err
+    line = src.splitlines().index("bsdf diffuse {") + 1
+    want = f"{tmp_path / 's' / 'diffuse.rdsl'}:{line}: warning: bsdf plugin `diffuse` shadows"
+    assert any(t.startswith(want) for t in err.splitlines()), err
+    assert err.count("warning:") == 1, err
+
+
+def test_a_combinators_name_is_an_error_without_a_shadowing_warning(tmp_path, recwarn):
+    (tmp_path / "mytwosided.rdsl").write_text(renamed("bsdf/diffuse.rdsl", "diffuse",
+                                                       "twosided"))
+    with pytest.raises(CompileError, match="name of one of rdsl's built-in bsdf combinators"):
+        load_scene_description(scene(tmp_path, '<bsdf type="twosided"/>'))
+    assert not [w for w in recwarn if "shadows" in str(w.message)]
+
+
+INTEGRATOR = """import render.integrator;
+integrator flat {
+    fn sample(scene: Scene, ray: Ray, sampler: Sampler) -> Spectrum { return Spectrum(1.0); }
+}
+"""
+
+
+@pytest.mark.parametrize("file, src, xml, message", [
+    ("flat.rdsl", INTEGRATOR, '<bsdf type="flat"/>',
+     "`flat` is declared as an integrator plugin at {dir}/flat.rdsl:2, not as a bsdf plugin: "
+     "a <bsdf> needs `bsdf flat {{`"),
+    ("mine.rdsl", renamed("bsdf/diffuse.rdsl", "diffuse", "mine"),
+     '<bsdf type="diffuse"><texture type="mine" name="reflectance"/></bsdf>',
+     "`mine` is declared as a bsdf plugin at {dir}/mine.rdsl:9, not as a texture plugin"),
+    ("mine.rdsl", renamed("bsdf/diffuse.rdsl", "diffuse", "mine"),
+     '<bsdf type="diffuse"/><emitter type="mine"/>',
+     "not as an emitter plugin: an <emitter> needs `emitter mine {{`"),
+], ids=["integrator-as-bsdf", "bsdf-as-texture", "bsdf-as-emitter"])
+def test_a_plugin_of_another_kind_is_named_in_the_error(tmp_path, file, src, xml, message):
+    (tmp_path / file).write_text(src)
+    path = scene(tmp_path, xml)
+    with pytest.raises(SceneError) as e:
+        load_scene_description(path)
+    text = str(e.value)
+    assert text.startswith(f"{path}:3:") and "unknown" in text, text
+    assert message.format(dir=tmp_path) in text, text
+
+
 def test_load_scene_plugins_and_register_plugin(tmp_path, monkeypatch):
     monkeypatch.setattr(registry, "_REGISTERED", [])
     monkeypatch.setenv("RDSL_CACHE_DIR", str(tmp_path / "cache"))
