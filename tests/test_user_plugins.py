@@ -115,6 +115,48 @@ def test_user_texture_renders():
     assert img.shape == (16, 16, 3) and np.all(np.isfinite(img)) and img.mean() > 0.01
 
 
+@pytest.mark.parametrize("variant,specialize", [("rgb", True), ("rgb", False),
+                                                ("mono", True)])
+def test_a_texture_without_eval_1_sets_a_colour(tmp_path, variant, specialize):
+    """eval_1 is needed only for a Float parameter (docs/plugins.md); a texture without it
+    on a reflectance once failed to compile ("plugin `flat` has no function `eval_1`", no
+    file): the texture's dispatch covered eval_1 of every texture.  It renders as the same
+    constant colour given as an <rgb>."""
+    (tmp_path / "flat.rdsl").write_text(
+        "texture flat {\n    param c: Spectrum = 0.5;\n"
+        "    fn eval(si: Surface) -> Spectrum { return c; }\n}\n")
+    rgb = '<rgb name="reflectance" value="0.885809, 0.698859, 0.666422"/>'
+    text = CBOX.read_text()
+    assert rgb in text
+    (tmp_path / "cbox.xml").write_text(text.replace(
+        rgb, '<texture type="flat" name="reflectance">'
+        f'{rgb.replace("reflectance", "c")}</texture>'))
+    got = render(tmp_path / "cbox.xml", variant=variant, specialize=specialize)
+    want = render(CBOX, variant=variant, specialize=specialize)
+    np.testing.assert_allclose(got, want, rtol=1e-5, atol=1e-6)
+
+
+def test_a_colour_from_float_params_in_the_generic_spectral_build(tmp_path):
+    """`Spectrum(red, 0.5, 0.2)` of a Float param folds to a constant colour when the kernel
+    is specialized, but is computed in the generic build (`--no-specialize`, `--watch`'s
+    default): the diagnostic says so and what to declare instead."""
+    (tmp_path / "tinted.rdsl").write_text(
+        "texture tinted {\n    param red: Float = 0.7;\n"
+        "    fn eval(si: Surface) -> Spectrum { return Spectrum(red, 0.5, 0.2); }\n"
+        "    fn eval_1(si: Surface) -> Float { return red; }\n}\n")
+    text = CBOX.read_text().replace(
+        '<rgb name="reflectance" value="0.885809, 0.698859, 0.666422"/>',
+        '<texture type="tinted" name="reflectance"><float name="red" value="0.9"/></texture>')
+    (tmp_path / "cbox.xml").write_text(text)
+    img = render(tmp_path / "cbox.xml", variant="spectral")  # specialized: a constant
+    assert np.all(np.isfinite(img)) and img.mean() > 0.01
+    with pytest.raises(CompileError) as e:
+        render(tmp_path / "cbox.xml", variant="spectral", specialize=False)
+    assert f"{tmp_path / 'tinted.rdsl'}:3:" in str(e.value) or "tinted.rdsl:3:" in str(e.value)
+    assert "--no-specialize or --watch" in str(e.value)
+    assert "make the colour a `Spectrum` param" in str(e.value)
+
+
 # ---------------------------------------------------------------------------- discovery
 
 def test_search_order_and_shadowing(tmp_path, monkeypatch):

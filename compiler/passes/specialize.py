@@ -107,6 +107,10 @@ PLACEHOLDERS = {
 # methods a plugin may lack: its instances then give this constant
 OPTIONAL = {"disperses": False, "smooth": True, "normal": 0.0, "eval_3": 0.0, "eval_1_grad": 0.0,
             "albedo_two_sided": False}
+# methods the dispatch covers on every instance of the kind but that the scene calls only
+# on instances that have them: `eval_1` of a texture that sets a Float parameter (the loader
+# requires it there, runtime/render/declared.py); a texture without one sets colours only
+CALLED_WHERE_DEFINED = {"eval_1": 0.0}
 TEXTURE_PLACEHOLDER = "scene_texture_eval"
 TEXTURE_PLACEHOLDER_1 = "scene_texture_eval_1"
 EMITTER_KIND_PLACEHOLDER = "scene_has_emitter_kind"  # folded to the scene's emitter kinds
@@ -288,13 +292,14 @@ class Specialize(Pass):
             callee, lead = module.functions.get(f"{plugin}_{method}_buffers"), args
             if callee is None:
                 callee, lead = own, plain
-            if callee is None and method not in OPTIONAL:
+            absent = OPTIONAL.get(method, CALLED_WHERE_DEFINED.get(method))
+            if callee is None and absent is None:
                 raise CompileError(f"plugin `{plugin}` has no function `{method}` "
                                    "(is its file imported?)")
             then = Block()
             tb = Builder(then, placeholder.loc)
             if callee is None:
-                tb.yield_(tb.const(OPTIONAL[method], placeholder.ret_types[0]))
+                tb.yield_(tb.const(absent, placeholder.ret_types[0]))
             else:
                 defaults = {p.value.name: p.default for p in own.params} if own else {}
                 textures: dict[tuple[int, bool], Value] = {}

@@ -70,12 +70,6 @@ def choose(path: Path, wanted: str | None) -> Declaration:
         raise CompileError(f"`rdsl test-plugin` tests {', '.join(KINDS)} and integrator "
                            "plugins, not "
                            f"{decl.kind} `{decl.name}`", _at(path, decl.line, 1))
-    if decl.kind == "texture" and "eval_1" not in decl.methods:
-        # the interface asks for eval() alone, but the renderer's texture dispatch
-        # (specialize) calls eval_1 of every texture in a scene
-        raise CompileError(f"texture `{decl.name}` has no `fn eval_1(si: Surface) -> Float` "
-                           "(the one value a Float parameter reads, e.g. the luminance of "
-                           "eval); the renderer needs it", _at(path, decl.line, 1))
     return decl
 
 
