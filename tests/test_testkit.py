@@ -141,7 +141,7 @@ def test_emitter_and_texture_pass(capsys):
     assert rc == 0 and rows["PASS"] == {"finite, >= 0"}, out
     assert "chi2 direction sampling" in rows["SKIP"] and "eval() alone" in out
     rc, rows, out = run(capsys, str(ROOT / "stdlib" / "texture" / "checkerboard.rdsl"))
-    assert rc == 0 and rows["PASS"] == {"range"}, out
+    assert rc == 0 and rows["PASS"] == {"range", "finite, >= 0"}, out
     assert "0.2 .. 0.4" in out   # the luminances of the two default colours
 
 
@@ -174,7 +174,8 @@ def test_broken_emitter_and_texture_fail(capsys, tmp_path, name):
     ("fn f() -> Float { return 1.0 }\n", ["bad.rdsl"], "bad.rdsl:1:"),
     ("fn f() -> Float { return 1.0; }\n", ["bad.rdsl"], "declares no plugin"),
     (LAMBERT.format(**GOOD), ["bad.rdsl", "-p", "roughness=1"], "has no param `roughness`"),
-    (LAMBERT.format(**GOOD), ["bad.rdsl", "-p", "reflectance=red"], "is a Texture"),
+    (LAMBERT.format(**GOOD), ["bad.rdsl", "-p", "reflectance=red"],
+     "is declared `Texture`; `red` is not a `Texture` value"),
     (LAMBERT.format(**GOOD), ["bad.rdsl", "--plugin", "other"], "no plugin `other`"),
     (LAMBERT.format(**GOOD), ["bad.rdsl", "--variant", "rgbx"], "unknown variant `rgbx`"),
 ])
@@ -187,6 +188,18 @@ def test_wrong_input_is_one_clear_message(capsys, tmp_path, monkeypatch, content
     rc = main(["test-plugin", *args])
     out, err = capsys.readouterr()
     assert rc == 1 and message in err and "Traceback" not in err + out, err
+
+
+def test_unsigned_params_from_the_command_line(capsys, tmp_path):
+    """`-p` sets a `UInt` param (it was refused: "is a UInt; `3` is not one") and refuses a
+    negative one."""
+    (tmp_path / "t.rdsl").write_text(
+        "texture t {\n  param n: UInt = 1u;\n"
+        "  fn eval(si: Surface) -> Spectrum { return Spectrum(Float(n) * 0.125); }\n}\n")
+    rc, rows, out = run(capsys, str(tmp_path / "t.rdsl"), "-p", "n=3")
+    assert rc == 0 and "0.375 .. 0.375" in out, out
+    rc, rows, out = run(capsys, str(tmp_path / "t.rdsl"), "-p", "n=-3")
+    assert rc == 1 and "param `n`" in out and "`-3` is not a `UInt` value" in out, out
 
 
 def test_a_texture_without_eval_1_is_tested_on_eval(capsys, tmp_path):

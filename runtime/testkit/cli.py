@@ -79,8 +79,11 @@ def _value(text: str, ptype: str) -> Any:
         if text.lower() not in ("true", "false", "1", "0"):
             raise ValueError
         return text.lower() in ("true", "1")
-    if ptype == "Int":
-        return int(text)
+    if ptype in ("Int", "UInt", "UInt64"):
+        n = int(text)
+        if n < 0 and ptype != "Int":
+            raise ValueError
+        return n
     if ptype == "Float":
         return float(text)
     if ptype in ("Spectrum", "Texture"):
@@ -115,8 +118,8 @@ def parse_params(items: list[str], decl: Declaration) -> dict[str, Any]:
         try:
             out[name] = _value(text.strip(), p.type)
         except ValueError:
-            raise CompileError(f"-p {item}: param `{name}` ({p.loc}) is a {p.type}; "
-                               f"`{text}` is not one") from None
+            raise CompileError(f"-p {item}: param `{name}` ({p.loc}) is declared "
+                               f"`{p.type}`; `{text}` is not a `{p.type}` value") from None
     return out
 
 
