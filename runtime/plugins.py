@@ -42,7 +42,9 @@ ENV = "RDSL_PLUGIN_PATH"
 # `mixture`); written as `{name}_{method}_buffers` functions rather than a `bsdf` block, so
 # found by their file
 INTERNAL = {"mixture": "bsdf/mixture.rdsl", "perturbed": "bsdf/perturbed.rdsl"}
-_DECL = re.compile(r"^[ \t]*(bsdf|texture|emitter|integrator)[ \t]+([A-Za-z_]\w*)[ \t]*\{", re.MULTILINE)
+# a declaration's line, `bsdf NAME {`, its brace there or on a later line (Allman style)
+_DECL = re.compile(r"^[ \t]*(bsdf|texture|emitter|integrator)[ \t]+([A-Za-z_]\w*)\s*\{",
+                   re.MULTILINE)
 # the language's keywords (dsl/parser.py): a file named like one cannot be imported
 _KEYWORDS = frozenset({"import", "struct", "fn", "param", "let", "var", "if", "else", "const",
                        "for", "in", "while", "break", "continue", "return", "true", "false"})

@@ -183,6 +183,20 @@ def test_search_order_and_shadowing(tmp_path, monkeypatch):
     assert desc.plugins["shade"].path == tmp_path / "env" / "shade.rdsl"
 
 
+def test_a_declaration_with_its_brace_on_the_next_line_is_found(tmp_path):
+    """`bsdf NAME` with `{` on the next line (valid rdsl) was missed by the folder's index:
+    "unknown bsdf plugin"; a declaration in a line comment is still no declaration."""
+    src = renamed("bsdf/diffuse.rdsl", "diffuse", "allman").replace("bsdf allman {",
+                                                                     "bsdf allman\n{")
+    (tmp_path / "allman.rdsl").write_text(src)
+    (tmp_path / "other.rdsl").write_text("// bsdf commented {\n")
+    desc = load_scene_description(scene(tmp_path, '<bsdf type="allman"/>'))
+    assert desc.plugins["allman"].path == tmp_path / "allman.rdsl"
+    assert desc.plugins["allman"].line == src.splitlines().index("bsdf allman") + 1
+    with pytest.raises(SceneError, match="unknown bsdf plugin 'commented'"):
+        load_scene_description(scene(tmp_path, '<bsdf type="commented"/>', "s2.xml"))
+
+
 def test_shadowing_a_stdlib_plugin_warns_naming_both_files(tmp_path):
     (tmp_path / "diffuse.rdsl").write_text((STDLIB / "bsdf" / "diffuse.rdsl").read_text())
     path = scene(tmp_path, '<bsdf type="diffuse"/>')
