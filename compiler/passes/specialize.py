@@ -26,8 +26,8 @@ texture at the same ``si`` first is the same thing.  A ``Float`` parameter set b
 lookup (its plugins' ``eval_1``, Mitsuba's).  In a texture's own dispatch (a texture of a
 texture: a checkerboard's colour) it becomes ``scene_texture_eval.texture{k}(k, ...)``, the
 dispatch restricted to texture ``k`` (:meth:`Specialize._nested_texture`), so that nesting,
-to any depth, is no recursion.  A method in ``OPTIONAL`` (``disperses``) may
-be missing from a plugin: its instances then give the constant listed there.
+to any depth, is no recursion.  A method in ``OPTIONAL`` (``disperses``; ``eval_1``, which the
+loader requires where it is called) may be missing: its instances then give that constant.
 
 A plugin's ``table`` functions (docs/language.md, "Tables") are computed parameters: each
 method gets, per table, a hidden ``NAME.table`` parameter, which the dispatch sets to where
@@ -106,11 +106,7 @@ PLACEHOLDERS = {
 }
 # methods a plugin may lack: its instances then give this constant
 OPTIONAL = {"disperses": False, "smooth": True, "normal": 0.0, "eval_3": 0.0, "eval_1_grad": 0.0,
-            "albedo_two_sided": False}
-# methods the dispatch covers on every instance of the kind but that the scene calls only
-# on instances that have them: `eval_1` of a texture that sets a Float parameter (the loader
-# requires it there, runtime/render/declared.py); a texture without one sets colours only
-CALLED_WHERE_DEFINED = {"eval_1": 0.0}
+            "albedo_two_sided": False, "eval_1": 0.0}
 TEXTURE_PLACEHOLDER = "scene_texture_eval"
 TEXTURE_PLACEHOLDER_1 = "scene_texture_eval_1"
 EMITTER_KIND_PLACEHOLDER = "scene_has_emitter_kind"  # folded to the scene's emitter kinds
@@ -292,14 +288,13 @@ class Specialize(Pass):
             callee, lead = module.functions.get(f"{plugin}_{method}_buffers"), args
             if callee is None:
                 callee, lead = own, plain
-            absent = OPTIONAL.get(method, CALLED_WHERE_DEFINED.get(method))
-            if callee is None and absent is None:
+            if callee is None and method not in OPTIONAL:
                 raise CompileError(f"plugin `{plugin}` has no function `{method}` "
                                    "(is its file imported?)")
             then = Block()
             tb = Builder(then, placeholder.loc)
             if callee is None:
-                tb.yield_(tb.const(absent, placeholder.ret_types[0]))
+                tb.yield_(tb.const(OPTIONAL[method], placeholder.ret_types[0]))
             else:
                 defaults = {p.value.name: p.default for p in own.params} if own else {}
                 textures: dict[tuple[int, bool], Value] = {}
