@@ -225,6 +225,20 @@ def test_cli_prints_the_shadowing_warning_once_as_warning(tmp_path, capsys):
     assert err.count("warning:") == 1, err
 
 
+def test_nan_samples_warning_names_the_scenes_own_plugins(tmp_path, capsys):
+    from rdsl.cli import main
+
+    src = renamed("bsdf/diffuse.rdsl", "diffuse", "nanny").replace(
+        "weight: depolarized(reflectance(si))", "weight: depolarized(reflectance(si)) * sqrt(-1.0)")
+    (tmp_path / "nanny.rdsl").write_text(src)
+    path = cbox_with(tmp_path, "nanny")
+    assert main(["render", str(path), "--spp", "1", "-D", "res=4", "--quiet",
+                 "-o", str(tmp_path / "o.exr")]) == 0
+    err = capsys.readouterr().err
+    assert "samples were NaN or infinite" in err, err
+    assert f"`rdsl test-plugin FILE` sweeps for NaN: {tmp_path / 'nanny.rdsl'}" in err, err
+
+
 def test_a_combinators_name_is_an_error_without_a_shadowing_warning(tmp_path, recwarn):
     (tmp_path / "mytwosided.rdsl").write_text(renamed("bsdf/diffuse.rdsl", "diffuse",
                                                        "twosided"))
@@ -325,7 +339,10 @@ def test_missing_interface_function_is_a_diagnostic_at_the_plugin(tmp_path):
 
 STRIPES = """texture stripes {
     param count: Int = 4;
-    fn on(si: Surface) -> Bool { return si.uv.x * Float(count) - floor(si.uv.x * Float(count)) < 0.5; }
+    fn on(si: Surface) -> Bool {
+        let x = si.uv.x * Float(count);
+        return x - floor(x) < 0.5;
+    }
     fn eval(si: Surface) -> Spectrum { return Spectrum(select(on(si), 0.8, 0.2)); }
     fn eval_1(si: Surface) -> Float { return select(on(si), 0.8, 0.2); }
 }
