@@ -247,8 +247,13 @@ def _write_source(text: str) -> Path:
     if decls is None:
         raise CompileError("the registered source declares no plugin (expected `bsdf NAME {`, "
                            "`texture NAME {` or `emitter NAME {`)")
-    folder = cache_dir() / "plugins" / hashlib.sha256(text.encode()).hexdigest()[:16]
-    path = folder / f"{decls.group(2)}.rdsl"
+    # (the key's prefix: a folder of the earlier naming may hold a `frame.rdsl`)
+    key = hashlib.sha256(b"named-v2\0" + text.encode()).hexdigest()[:16]
+    folder = cache_dir() / "plugins" / key
+    # named after the plugin, unless that name is a stdlib module's (`frame`): the file
+    # would hide it from its own imports
+    stem = decls.group(2)
+    path = folder / f"{stem}{'_plugin' if (STDLIB / f'{stem}.rdsl').is_file() else ''}.rdsl"
     try:
         folder.mkdir(parents=True, exist_ok=True)
         if not path.is_file() or path.read_text() != text:

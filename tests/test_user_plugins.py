@@ -299,6 +299,30 @@ def test_load_scene_plugins_and_register_plugin(tmp_path, monkeypatch):
         rdsl.register_plugin("fn f() -> Float { return 1.0; }\n")
 
 
+def test_registered_source_named_like_a_stdlib_module_renders(tmp_path, monkeypatch):
+    """Source text is written to a file named after its plugin: a plugin `frame` (which
+    imports the stdlib's `frame`) was written to frame.rdsl, which then imported itself
+    ("import cycle: frame.rdsl -> frame.rdsl")."""
+    monkeypatch.setattr(registry, "_REGISTERED", [])
+    monkeypatch.setenv("RDSL_CACHE_DIR", str(tmp_path / "cache"))
+    assert rdsl.register_plugin(renamed("bsdf/diffuse.rdsl", "diffuse", "frame")) == ["frame"]
+    text = CBOX.read_text().replace('type="diffuse"', 'type="frame"')
+    (tmp_path / "cbox.xml").write_text(text)
+    got = render(tmp_path / "cbox.xml")
+    assert np.array_equal(got, render(CBOX))
+
+
+def test_a_plugin_file_named_like_a_stdlib_module_it_imports(tmp_path):
+    """A warp.rdsl next to the scene that imports `warp` imports itself: the cycle's
+    diagnostic says why and what to do."""
+    (tmp_path / "warp.rdsl").write_text(renamed("bsdf/diffuse.rdsl", "diffuse", "mywarp"))
+    with pytest.raises(CompileError) as e:
+        load_scene_description(scene(tmp_path, '<bsdf type="mywarp"/>'))
+    text = str(e.value)
+    assert "warp.rdsl:6:1: error: import cycle: warp.rdsl -> warp.rdsl: the file's name " \
+        "hides the stdlib's `warp`" in text and "rename the file" in text, text
+
+
 def test_cli_plugins_option(user, tmp_path):
     """`rdsl render --plugins DIR` finds a plugin for a scene elsewhere."""
     path = cbox_with(tmp_path / "elsewhere", "mydiffuse", "area")
