@@ -68,7 +68,8 @@ def test_cornell_box_dict_renders_as_its_xml():
 @pytest.mark.parametrize("scene, message", [
     ([1, 2], "expected a dict"),
     ({"type": "shape"}, "must have \"type\": \"scene\""),
-    ({"type": "scene", "a": {"type": "difuse"}}, "scene['a']: unknown plugin type 'difuse'"),
+    ({"type": "scene", "a": {"type": "difuse"}},
+     "scene['a']: unknown plugin type 'difuse' (did you mean 'diffuse'"),
     ({"type": "scene", "a": {"type": "diffuse", "reflectance": {"value": 1}}},
      "scene['a']['reflectance']: a nested dict needs a \"type\""),
     ({"type": "scene", "a": {"type": "diffuse", "reflectance": rgb(1, 2)}},

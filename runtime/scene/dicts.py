@@ -20,6 +20,7 @@ loader reports at a line of the XML into one at the key.
 
 from __future__ import annotations
 
+import difflib
 import os
 import re
 from collections.abc import Mapping
@@ -221,7 +222,10 @@ class _Writer:
             return self.spectrum_plugin(key, ptype, value, path, indent)
         category = self.categories.get(ptype)
         if category is None:
-            raise _error(f"load_dict: {path}: unknown plugin type {ptype!r}")
+            near = difflib.get_close_matches(ptype, list(self.categories), n=3)
+            raise _error(f"load_dict: {path}: unknown plugin type {ptype!r}"
+                         + (f" (did you mean {', '.join(map(repr, near))}?)" if near else "")
+                         + "; user plugins are found in the current folder and in `plugins=`")
         ident = value.get("id", key if top else None)
         attrs = f" type={quoteattr(ptype)}"
         if ident is not None:
