@@ -36,7 +36,9 @@ def _show_warning(message, category, filename, lineno, file=None, line=None) -> 
     line) prints as ``warning: ...``, not with the line of rdsl's code that raised it."""
     if not issubclass(category, UserWarning):
         return _default_show_warning(message, category, filename, lineno, file, line)
-    print(f"warning: {message}", file=sys.stderr if file is None else file)
+    text = str(message)  # `file:line: warning: ...` already says what it is
+    print(text if ": warning: " in text else f"warning: {text}",
+          file=sys.stderr if file is None else file)
 
 
 _default_show_warning = warnings.showwarning

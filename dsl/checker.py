@@ -40,7 +40,7 @@ from . import ast as A
 from .builtins import BUILTIN_FNS, check_binary, check_builtin, check_unary
 from .declarations import Declarations
 from .imports import STDLIB, load_program
-from .interfaces import PLUGIN_INTERFACES, check_integrator
+from .interfaces import OPTIONAL_INTERFACES, PLUGIN_INTERFACES, check_integrator
 from .parser import parse
 from .tables import table_options as _table_options
 from .program import CheckedProgram, FnInfo, ModuleInfo, PluginInfo, Symbol
@@ -174,13 +174,23 @@ class _Checker(Declarations):
             if fn is None:
                 raise err(f"{pd.kind} `{pd.name}` is missing the required function `{sig}`",
                           pd.loc)
-            want = [self._iface_type(t) for _, t in params]
-            if fn.param_types != want or fn.ret != self._iface_type(ret):
-                raise err(f"`{pd.name}.{mname}` has the wrong signature: expected `{sig}`, "
-                          f"found `{fn.signature()}`", fn.decl.loc)
+            self._check_signature(pd, fn, mname, params, ret)
+        for mname, params, ret in OPTIONAL_INTERFACES.get(pd.kind, ()):
+            fn = pl.fns.get(mname)
+            if fn is not None:
+                self._check_signature(pd, fn, mname, params, ret)
         if pd.kind == "integrator":
             check_integrator(pl, self.structs)
         return pl
+
+    def _check_signature(self, pd: A.PluginDecl, fn: FnInfo, mname: str,
+                         params: list[tuple[str, str]], ret: str) -> None:
+        """``fn``, the plugin's ``mname``, has the interface's parameter and return types."""
+        want = [self._iface_type(t) for _, t in params]
+        if fn.param_types != want or fn.ret != self._iface_type(ret):
+            sig = f"fn {mname}(" + ", ".join(f"{n}: {t}" for n, t in params) + f") -> {ret}"
+            raise err(f"`{pd.name}.{mname}` has the wrong signature: expected `{sig}`, "
+                      f"found `{fn.signature()}`", fn.decl.loc)
 
     def _iface_type(self, name: str) -> Type | None:
         if name in BUILTIN_TYPES:

@@ -62,7 +62,11 @@ class Loader:
                 if key in self.stack:
                     cycle = self.stack[self.stack.index(key):] + [key]
                     names = " -> ".join(Path(k).name for k in cycle)
-                    raise err(f"import cycle: {names}", imp.loc)
+                    hint = ""
+                    if len(cycle) == 2 and (STDLIB / rel).is_file() and d != STDLIB:
+                        hint = (f": the file's name hides the stdlib's `{'.'.join(imp.path)}` "
+                                f"({STDLIB / rel}) from the files next to it; rename the file")
+                    raise err(f"import cycle: {names}{hint}", imp.loc)
                 if key not in self.modules:
                     self.load_path(cand)
                 return

@@ -20,6 +20,15 @@ PLUGIN_INTERFACES: dict[str, list[tuple[str, list[tuple[str, str]], str]]] = {
     # and return AOVs beside the radiance
     "integrator": [],
 }
+# functions a plugin may leave out (the renderer then assumes a default:
+# compiler/passes/specialize.py, OPTIONAL) but must declare with these signatures when it has
+# them, since the scene's dispatch calls them so
+OPTIONAL_INTERFACES: dict[str, list[tuple[str, list[tuple[str, str]], str]]] = {
+    "bsdf": [("disperses", [], "Bool"), ("smooth", [], "Bool"),
+             ("albedo_two_sided", [], "Bool")],
+    # the one value of a texture that sets a Float parameter (a roughness, a blend weight)
+    "texture": [("eval_1", [("si", "Surface")], "Float")],
+}
 INTEGRATOR_SAMPLE = "fn sample(scene: Scene, ray: Ray, sampler: Sampler) -> Spectrum"
 INTEGRATOR_VALID = ("fn sample_valid(scene: Scene, ray: Ray, sampler: Sampler) "
                     "-> (Spectrum, Bool)")

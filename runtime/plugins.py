@@ -42,7 +42,9 @@ ENV = "RDSL_PLUGIN_PATH"
 # `mixture`); written as `{name}_{method}_buffers` functions rather than a `bsdf` block, so
 # found by their file
 INTERNAL = {"mixture": "bsdf/mixture.rdsl", "perturbed": "bsdf/perturbed.rdsl"}
-_DECL = re.compile(r"^[ \t]*(bsdf|texture|emitter|integrator)[ \t]+([A-Za-z_]\w*)[ \t]*\{", re.MULTILINE)
+# a declaration's line, `bsdf NAME {`, its brace there or on a later line (Allman style)
+_DECL = re.compile(r"^[ \t]*(bsdf|texture|emitter|integrator)[ \t]+([A-Za-z_]\w*)\s*\{",
+                   re.MULTILINE)
 # the language's keywords (dsl/parser.py): a file named like one cannot be imported
 _KEYWORDS = frozenset({"import", "struct", "fn", "param", "let", "var", "if", "else", "const",
                        "for", "in", "while", "break", "continue", "return", "true", "false"})
@@ -245,8 +247,13 @@ def _write_source(text: str) -> Path:
     if decls is None:
         raise CompileError("the registered source declares no plugin (expected `bsdf NAME {`, "
                            "`texture NAME {` or `emitter NAME {`)")
-    folder = cache_dir() / "plugins" / hashlib.sha256(text.encode()).hexdigest()[:16]
-    path = folder / f"{decls.group(2)}.rdsl"
+    # (the key's prefix: a folder of the earlier naming may hold a `frame.rdsl`)
+    key = hashlib.sha256(b"named-v2\0" + text.encode()).hexdigest()[:16]
+    folder = cache_dir() / "plugins" / key
+    # named after the plugin, unless that name is a stdlib module's (`frame`): the file
+    # would hide it from its own imports
+    stem = decls.group(2)
+    path = folder / f"{stem}{'_plugin' if (STDLIB / f'{stem}.rdsl').is_file() else ''}.rdsl"
     try:
         folder.mkdir(parents=True, exist_ok=True)
         if not path.is_file() or path.read_text() != text:
@@ -411,12 +418,15 @@ def scene_spec(registry: PluginRegistry, category: str, ptype: str) -> Any:
     if schema is not None and std is None:  # e.g. the `point` emitter: functions, no plugin
         f = STDLIB / category / f"{ptype}.rdsl"
         builtin = str(f) if f.is_file() else f"the built-in {category} `{ptype}`"
+    if (schema is not None and schema.children) or ptype in INTERNAL:
+        # a combinator's name cannot be taken (an error, so no warning that it is shadowed)
+        user = next((d for d in registry.candidates(category, ptype) if not d.stdlib), None)
+        if user is not None:
+            raise CompileError(f"`{ptype}` is the name of one of rdsl's built-in {category} "
+                               "combinators; rename this plugin", Loc(str(user.path), user.line,
+                                                                      1))
     decl = registry.lookup(category, ptype, builtin)
     if decl is not None and not decl.stdlib:
-        if (schema is not None and schema.children) or ptype in INTERNAL:
-            raise CompileError(f"`{ptype}` is the name of one of rdsl's built-in {category} "
-                               "combinators; rename this plugin", Loc(str(decl.path), decl.line,
-                                                                      1))
         return declared_spec(decl)
     if schema is not None:
         return schema

@@ -213,6 +213,17 @@ def test_integrator_xml_mistakes(tmp_path):
     assert "nests no other one" in text, text
 
 
+def test_a_texture_on_an_integrators_param_is_an_error_at_the_texture(tmp_path):
+    plugin = GOOD.replace("param k: Float = 1.0;", "param k: Float = 1.0;\n"
+                          "        param tint: Texture = 0.5;")
+    xml = ('<integrator type="mine">\n<texture type="checkerboard" name="tint"/>'
+           '</integrator>')
+    text = _errors(tmp_path, plugin, xml)
+    assert "a texture cannot set `tint` here (an integrator's params take constant colours, "\
+        "not textures)" in text, text
+    assert f"{tmp_path / 'scene.xml'}:3:1:" in text or "scene.xml:3:1:" in text, text
+
+
 def test_integrator_aov_field_types_are_checked(tmp_path):
     plugin = AOV_PLUGIN.replace("hit: Float,", "hit: Int,").replace("hit: 0.0", "hit: 0") \
         .replace("hit: 1.0", "hit: 1").replace("extras", "mine")

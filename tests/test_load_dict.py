@@ -68,7 +68,8 @@ def test_cornell_box_dict_renders_as_its_xml():
 @pytest.mark.parametrize("scene, message", [
     ([1, 2], "expected a dict"),
     ({"type": "shape"}, "must have \"type\": \"scene\""),
-    ({"type": "scene", "a": {"type": "difuse"}}, "scene['a']: unknown plugin type 'difuse'"),
+    ({"type": "scene", "a": {"type": "difuse"}},
+     "scene['a']: unknown plugin type 'difuse' (did you mean 'diffuse'"),
     ({"type": "scene", "a": {"type": "diffuse", "reflectance": {"value": 1}}},
      "scene['a']['reflectance']: a nested dict needs a \"type\""),
     ({"type": "scene", "a": {"type": "diffuse", "reflectance": rgb(1, 2)}},
@@ -80,6 +81,24 @@ def test_dict_mistakes_name_the_key(scene, message):
     with pytest.raises(SceneError) as e:
         rdsl.load_dict(scene)
     assert message in str(e.value)
+
+
+@pytest.mark.parametrize("key, value, message", [
+    ("roughness", 0.3, "unknown parameter 'roughness' of bsdf 'diffuse'"),
+    ("reflectance", True, "parameter 'reflectance' of bsdf 'diffuse'"),
+    ("reflectance", {"type": "ref", "id": "nowhere"}, "<ref>: no object with id 'nowhere'"),
+])
+def test_a_loader_error_names_the_key_not_the_written_xml(key, value, message):
+    """Errors the scene loader finds (it reads the XML the dict is written as) name the
+    dict's key path, not a line of that file, which the user never wrote."""
+    bad = cornell_box()
+    bad["white"][key] = value
+    with pytest.raises(SceneError) as e:
+        rdsl.load_dict(bad)
+    text = str(e.value)
+    assert text.startswith(f"error: load_dict: scene['white'][{key!r}]: {message}"), text
+    assert "dicts" not in text and ".xml" not in text, text  # the cache's file is not named
+    assert f'name="{key}"' in text, text  # what the value was written as
 
 
 def test_a_dict_error_the_loader_finds_is_reported():

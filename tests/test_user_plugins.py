@@ -115,6 +115,48 @@ def test_user_texture_renders():
     assert img.shape == (16, 16, 3) and np.all(np.isfinite(img)) and img.mean() > 0.01
 
 
+@pytest.mark.parametrize("variant,specialize", [("rgb", True), ("rgb", False),
+                                                ("mono", True)])
+def test_a_texture_without_eval_1_sets_a_colour(tmp_path, variant, specialize):
+    """eval_1 is needed only for a Float parameter (docs/plugins.md); a texture without it
+    on a reflectance once failed to compile ("plugin `flat` has no function `eval_1`", no
+    file): the texture's dispatch covered eval_1 of every texture.  It renders as the same
+    constant colour given as an <rgb>."""
+    (tmp_path / "flat.rdsl").write_text(
+        "texture flat {\n    param c: Spectrum = 0.5;\n"
+        "    fn eval(si: Surface) -> Spectrum { return c; }\n}\n")
+    rgb = '<rgb name="reflectance" value="0.885809, 0.698859, 0.666422"/>'
+    text = CBOX.read_text()
+    assert rgb in text
+    (tmp_path / "cbox.xml").write_text(text.replace(
+        rgb, '<texture type="flat" name="reflectance">'
+        f'{rgb.replace("reflectance", "c")}</texture>'))
+    got = render(tmp_path / "cbox.xml", variant=variant, specialize=specialize)
+    want = render(CBOX, variant=variant, specialize=specialize)
+    np.testing.assert_allclose(got, want, rtol=1e-5, atol=1e-6)
+
+
+def test_a_colour_from_float_params_in_the_generic_spectral_build(tmp_path):
+    """`Spectrum(red, 0.5, 0.2)` of a Float param folds to a constant colour when the kernel
+    is specialized, but is computed in the generic build (`--no-specialize`, `--watch`'s
+    default): the diagnostic says so and what to declare instead."""
+    (tmp_path / "tinted.rdsl").write_text(
+        "texture tinted {\n    param red: Float = 0.7;\n"
+        "    fn eval(si: Surface) -> Spectrum { return Spectrum(red, 0.5, 0.2); }\n"
+        "    fn eval_1(si: Surface) -> Float { return red; }\n}\n")
+    text = CBOX.read_text().replace(
+        '<rgb name="reflectance" value="0.885809, 0.698859, 0.666422"/>',
+        '<texture type="tinted" name="reflectance"><float name="red" value="0.9"/></texture>')
+    (tmp_path / "cbox.xml").write_text(text)
+    img = render(tmp_path / "cbox.xml", variant="spectral")  # specialized: a constant
+    assert np.all(np.isfinite(img)) and img.mean() > 0.01
+    with pytest.raises(CompileError) as e:
+        render(tmp_path / "cbox.xml", variant="spectral", specialize=False)
+    assert f"{tmp_path / 'tinted.rdsl'}:3:" in str(e.value) or "tinted.rdsl:3:" in str(e.value)
+    assert "--no-specialize or --watch" in str(e.value)
+    assert "make the colour a `Spectrum` param" in str(e.value)
+
+
 # ---------------------------------------------------------------------------- discovery
 
 def test_search_order_and_shadowing(tmp_path, monkeypatch):
@@ -141,6 +183,20 @@ def test_search_order_and_shadowing(tmp_path, monkeypatch):
     assert desc.plugins["shade"].path == tmp_path / "env" / "shade.rdsl"
 
 
+def test_a_declaration_with_its_brace_on_the_next_line_is_found(tmp_path):
+    """`bsdf NAME` with `{` on the next line (valid rdsl) was missed by the folder's index:
+    "unknown bsdf plugin"; a declaration in a line comment is still no declaration."""
+    src = renamed("bsdf/diffuse.rdsl", "diffuse", "allman").replace("bsdf allman {",
+                                                                     "bsdf allman\n{")
+    (tmp_path / "allman.rdsl").write_text(src)
+    (tmp_path / "other.rdsl").write_text("// bsdf commented {\n")
+    desc = load_scene_description(scene(tmp_path, '<bsdf type="allman"/>'))
+    assert desc.plugins["allman"].path == tmp_path / "allman.rdsl"
+    assert desc.plugins["allman"].line == src.splitlines().index("bsdf allman") + 1
+    with pytest.raises(SceneError, match="unknown bsdf plugin 'commented'"):
+        load_scene_description(scene(tmp_path, '<bsdf type="commented"/>', "s2.xml"))
+
+
 def test_shadowing_a_stdlib_plugin_warns_naming_both_files(tmp_path):
     (tmp_path / "diffuse.rdsl").write_text((STDLIB / "bsdf" / "diffuse.rdsl").read_text())
     path = scene(tmp_path, '<bsdf type="diffuse"/>')
@@ -150,6 +206,73 @@ def test_shadowing_a_stdlib_plugin_warns_naming_both_files(tmp_path):
     assert str(STDLIB / "bsdf" / "diffuse.rdsl") in str(w[0].message)
     assert desc.plugins["diffuse"].path == tmp_path / "diffuse.rdsl"
     assert desc.shapes[0].bsdf.decl is not None  # its own params, not Mitsuba's
+
+
+def test_cli_prints_the_shadowing_warning_once_as_warning(tmp_path, capsys):
+    """`rdsl render` prints the shadowing warning as docs/plugins.md shows it, `file:line:
+    warning: ...` (it printed `warning: file:line: warning: ...`)."""
+    from rdsl.cli import main
+
+    src = (STDLIB / "bsdf" / "diffuse.rdsl").read_text()
+    path = cbox_with(tmp_path / "s")
+    (tmp_path / "s" / "diffuse.rdsl").write_text(src)
+    assert main(["render", str(path), "--spp", "1", "-D", "res=4", "--quiet",
+                 "-o", str(tmp_path / "o.exr")]) == 0
+    err = capsys.readouterr().err
+    line = src.splitlines().index("bsdf diffuse {") + 1
+    want = f"{tmp_path / 's' / 'diffuse.rdsl'}:{line}: warning: bsdf plugin `diffuse` shadows"
+    assert any(t.startswith(want) for t in err.splitlines()), err
+    assert err.count("warning:") == 1, err
+
+
+def test_nan_samples_warning_names_the_scenes_own_plugins(tmp_path, capsys):
+    from rdsl.cli import main
+
+    src = renamed("bsdf/diffuse.rdsl", "diffuse", "nanny").replace(
+        "weight: depolarized(reflectance(si))", "weight: depolarized(reflectance(si)) * sqrt(-1.0)")
+    (tmp_path / "nanny.rdsl").write_text(src)
+    path = cbox_with(tmp_path, "nanny")
+    assert main(["render", str(path), "--spp", "1", "-D", "res=4", "--quiet",
+                 "-o", str(tmp_path / "o.exr")]) == 0
+    err = capsys.readouterr().err
+    assert "samples were NaN or infinite" in err, err
+    assert f"`rdsl test-plugin FILE` sweeps for NaN: {tmp_path / 'nanny.rdsl'}" in err, err
+
+
+def test_a_combinators_name_is_an_error_without_a_shadowing_warning(tmp_path, recwarn):
+    (tmp_path / "mytwosided.rdsl").write_text(renamed("bsdf/diffuse.rdsl", "diffuse",
+                                                       "twosided"))
+    with pytest.raises(CompileError, match="name of one of rdsl's built-in bsdf combinators"):
+        load_scene_description(scene(tmp_path, '<bsdf type="twosided"/>'))
+    assert not [w for w in recwarn if "shadows" in str(w.message)]
+
+
+INTEGRATOR = """import render.integrator;
+integrator flat {
+    fn sample(scene: Scene, ray: Ray, sampler: Sampler) -> Spectrum { return Spectrum(1.0); }
+}
+"""
+
+
+@pytest.mark.parametrize("file, src, xml, message", [
+    ("flat.rdsl", INTEGRATOR, '<bsdf type="flat"/>',
+     "`flat` is declared as an integrator plugin at {dir}/flat.rdsl:2, not as a bsdf plugin: "
+     "a <bsdf> needs `bsdf flat {{`"),
+    ("mine.rdsl", renamed("bsdf/diffuse.rdsl", "diffuse", "mine"),
+     '<bsdf type="diffuse"><texture type="mine" name="reflectance"/></bsdf>',
+     "`mine` is declared as a bsdf plugin at {dir}/mine.rdsl:9, not as a texture plugin"),
+    ("mine.rdsl", renamed("bsdf/diffuse.rdsl", "diffuse", "mine"),
+     '<bsdf type="diffuse"/><emitter type="mine"/>',
+     "not as an emitter plugin: an <emitter> needs `emitter mine {{`"),
+], ids=["integrator-as-bsdf", "bsdf-as-texture", "bsdf-as-emitter"])
+def test_a_plugin_of_another_kind_is_named_in_the_error(tmp_path, file, src, xml, message):
+    (tmp_path / file).write_text(src)
+    path = scene(tmp_path, xml)
+    with pytest.raises(SceneError) as e:
+        load_scene_description(path)
+    text = str(e.value)
+    assert text.startswith(f"{path}:3:") and "unknown" in text, text
+    assert message.format(dir=tmp_path) in text, text
 
 
 def test_load_scene_plugins_and_register_plugin(tmp_path, monkeypatch):
@@ -174,6 +297,30 @@ def test_load_scene_plugins_and_register_plugin(tmp_path, monkeypatch):
     assert got.is_relative_to(tmp_path / "cache") and got.read_text() == source
     with pytest.raises(CompileError, match="declares no plugin"):
         rdsl.register_plugin("fn f() -> Float { return 1.0; }\n")
+
+
+def test_registered_source_named_like_a_stdlib_module_renders(tmp_path, monkeypatch):
+    """Source text is written to a file named after its plugin: a plugin `frame` (which
+    imports the stdlib's `frame`) was written to frame.rdsl, which then imported itself
+    ("import cycle: frame.rdsl -> frame.rdsl")."""
+    monkeypatch.setattr(registry, "_REGISTERED", [])
+    monkeypatch.setenv("RDSL_CACHE_DIR", str(tmp_path / "cache"))
+    assert rdsl.register_plugin(renamed("bsdf/diffuse.rdsl", "diffuse", "frame")) == ["frame"]
+    text = CBOX.read_text().replace('type="diffuse"', 'type="frame"')
+    (tmp_path / "cbox.xml").write_text(text)
+    got = render(tmp_path / "cbox.xml")
+    assert np.array_equal(got, render(CBOX))
+
+
+def test_a_plugin_file_named_like_a_stdlib_module_it_imports(tmp_path):
+    """A warp.rdsl next to the scene that imports `warp` imports itself: the cycle's
+    diagnostic says why and what to do."""
+    (tmp_path / "warp.rdsl").write_text(renamed("bsdf/diffuse.rdsl", "diffuse", "mywarp"))
+    with pytest.raises(CompileError) as e:
+        load_scene_description(scene(tmp_path, '<bsdf type="mywarp"/>'))
+    text = str(e.value)
+    assert "warp.rdsl:6:1: error: import cycle: warp.rdsl -> warp.rdsl: the file's name " \
+        "hides the stdlib's `warp`" in text and "rename the file" in text, text
 
 
 def test_cli_plugins_option(user, tmp_path):
@@ -214,6 +361,52 @@ def test_missing_interface_function_is_a_diagnostic_at_the_plugin(tmp_path):
         str(e.value)
 
 
+STRIPES = """texture stripes {
+    param count: Int = 4;
+    fn on(si: Surface) -> Bool {
+        let x = si.uv.x * Float(count);
+        return x - floor(x) < 0.5;
+    }
+    fn eval(si: Surface) -> Spectrum { return Spectrum(select(on(si), 0.8, 0.2)); }
+    fn eval_1(si: Surface) -> Float { return select(on(si), 0.8, 0.2); }
+}
+"""
+
+
+@pytest.mark.parametrize("kind, old, new, found", [
+    # a texture's eval_1 giving a colour: once an internal error (`mul` on mismatched
+    # aggregates) where the texture set a Float parameter
+    ("texture", "fn eval_1(si: Surface) -> Float { return select(on(si), 0.8, 0.2); }",
+     "fn eval_1(si: Surface) -> Spectrum { return Spectrum(0.5); }",
+     "found `eval_1(Surface) -> Spectrum`"),
+    # one more parameter: once "parameter `k` of `stripes` has no value", with no file
+    ("texture", "fn eval_1(si: Surface) -> Float", "fn eval_1(si: Surface, k: Float) -> Float",
+     "found `eval_1(Surface, Float) -> Float`"),
+    ("bsdf", "fn albedo_two_sided() -> Bool { return true; }",
+     "fn albedo_two_sided() -> Float { return 1.0; }", "found `albedo_two_sided() -> Float`"),
+    ("bsdf", "fn albedo_two_sided() -> Bool { return true; }",
+     "fn disperses(x: Float) -> Bool { return x > 0.5; }", "found `disperses(Float) -> Bool`"),
+], ids=["eval_1-colour", "eval_1-two-args", "albedo_two_sided-float", "disperses-arg"])
+def test_optional_interface_function_with_a_wrong_signature(tmp_path, kind, old, new, found):
+    """An optional function of an interface (a texture's `eval_1`, a BSDF's `disperses`...)
+    that the plugin defines must have the interface's signature: a diagnostic at its line."""
+    base = STRIPES if kind == "texture" else renamed("bsdf/diffuse.rdsl", "diffuse", "mine")
+    assert old in base
+    src = base.replace(old, new)
+    name = "stripes" if kind == "texture" else "mine"
+    (tmp_path / f"{name}.rdsl").write_text(src)
+    bsdf = ('<bsdf type="roughconductor"><texture type="stripes" name="alpha"/></bsdf>'
+            if kind == "texture" else '<bsdf type="mine"/>')
+    with pytest.raises(CompileError) as e:
+        load_scene_description(scene(tmp_path, bsdf))
+    mname = new.split("(")[0].split()[-1]
+    line = next(i for i, t in enumerate(src.splitlines(), 1) if f"fn {mname}(" in t)
+    text = str(e.value)
+    assert f"{name}.rdsl:{line}:" in text, text
+    assert f"`{name}.{mname}` has the wrong signature: expected `fn {mname}(" in text, text
+    assert found in text, text
+
+
 def _param_line(path: Path, name: str) -> int:
     return next(i for i, t in enumerate(path.read_text().splitlines(), 1)
                 if re.match(rf"\s*param {name}\b", t))
@@ -235,6 +428,24 @@ def test_wrong_parameter_type_names_xml_line_and_declaration(tmp_path):
         assert text.startswith(f"{path}:4:"), text
         assert expected in text and decl in text, text
     assert "`param sigma: Float`" in text
+
+
+def test_negative_integer_for_an_unsigned_param_is_an_error(tmp_path):
+    """A `UInt` param given a negative <integer> (once taken, wrapped to 2^32 - 3)."""
+    (tmp_path / "seeded.rdsl").write_text(
+        "texture seeded {\n    param seed: UInt = 1u;\n"
+        "    fn eval(si: Surface) -> Spectrum { return Spectrum(Float(seed % 7u) * 0.1); }\n}\n")
+    ok = scene(tmp_path, '<bsdf type="diffuse"><texture type="seeded" name="reflectance">'
+               '<integer name="seed" value="3"/></texture></bsdf>')
+    load_scene_description(ok)
+    path = scene(tmp_path, '<bsdf type="diffuse"><texture type="seeded" name="reflectance">'
+                 '<integer name="seed" value="-3"/></texture></bsdf>', "bad.xml")
+    with pytest.raises(SceneError) as e:
+        load_scene_description(path)
+    text = str(e.value)
+    assert text.startswith(f"{path}:3:"), text
+    assert "parameter 'seed' of texture 'seeded'" in text and "cannot be -3" in text, text
+    assert f"`param seed: UInt` at {tmp_path / 'seeded.rdsl'}:2" in text, text
 
 
 def test_unknown_and_string_properties_are_errors(tmp_path):

@@ -26,8 +26,8 @@ texture at the same ``si`` first is the same thing.  A ``Float`` parameter set b
 lookup (its plugins' ``eval_1``, Mitsuba's).  In a texture's own dispatch (a texture of a
 texture: a checkerboard's colour) it becomes ``scene_texture_eval.texture{k}(k, ...)``, the
 dispatch restricted to texture ``k`` (:meth:`Specialize._nested_texture`), so that nesting,
-to any depth, is no recursion.  A method in ``OPTIONAL`` (``disperses``) may
-be missing from a plugin: its instances then give the constant listed there.
+to any depth, is no recursion.  A method in ``OPTIONAL`` (``disperses``; ``eval_1``, which the
+loader requires where it is called) may be missing: its instances then give that constant.
 
 A plugin's ``table`` functions (docs/language.md, "Tables") are computed parameters: each
 method gets, per table, a hidden ``NAME.table`` parameter, which the dispatch sets to where
@@ -106,7 +106,7 @@ PLACEHOLDERS = {
 }
 # methods a plugin may lack: its instances then give this constant
 OPTIONAL = {"disperses": False, "smooth": True, "normal": 0.0, "eval_3": 0.0, "eval_1_grad": 0.0,
-            "albedo_two_sided": False}
+            "albedo_two_sided": False, "eval_1": 0.0}
 TEXTURE_PLACEHOLDER = "scene_texture_eval"
 TEXTURE_PLACEHOLDER_1 = "scene_texture_eval_1"
 EMITTER_KIND_PLACEHOLDER = "scene_has_emitter_kind"  # folded to the scene's emitter kinds

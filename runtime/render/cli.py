@@ -123,8 +123,11 @@ def render_command(args: Any) -> int:
                        progress=not args.quiet)
     t_render = time.perf_counter() - t1
     if scene.nonfinite:
+        own = sorted({str(d.path) for d in scene.desc.plugins.values() if not d.stdlib})
+        hint = (f" (the scene's own plugins, which `rdsl test-plugin FILE` sweeps for NaN: "
+                f"{', '.join(own)})" if own else "")
         print(f"warning: {scene.nonfinite} samples were NaN or infinite and were left out of "
-              "the image", file=sys.stderr)
+              f"the image{hint}", file=sys.stderr)
     try:
         out.parent.mkdir(parents=True, exist_ok=True)
         png = write_render(out, img, scene.channel_names)

@@ -44,9 +44,11 @@ def declared_params(plugin: Any, textures: Any = None, illuminant: bool = False
         what = f"{plugin.type}.{name}"
         if getattr(value, "category", None) == "texture":
             if textures is None:
+                article = "an" if plugin.category[0] in "aeiou" else "a"
                 raise CompileError(f"{_where(plugin)}: a texture cannot set `{name}` here "
-                                   f"(a {plugin.category}'s params take no texture)",
-                                   plugin.loc)
+                                   f"({article} {plugin.category}'s params take constant "
+                                   "colours, not textures)",
+                                   getattr(value, "loc", None) or plugin.loc)
             usage = ("scalar" if rdsl_type == "Float" else "emitted" if illuminant
                      else "colour")
             out[name] = textures.ref(value, what, usage)

@@ -567,7 +567,7 @@ def load_dict(scene: dict, variant: str | ColorModel = "rgb", target: str | Targ
     :func:`load_scene` loads a file, user plugins found in the current folder first."""
     from ..cache import cache_dir
     from ..plugins import PluginRegistry
-    from ..scene.dicts import dict_to_xml
+    from ..scene.dicts import dict_error, dict_to_xml
 
     build = build or Build.of(target, variant)
     places = [Path.cwd(), *plugins]
@@ -579,4 +579,7 @@ def load_dict(scene: dict, variant: str | ColorModel = "rgb", target: str | Targ
         tmp = path.with_suffix(f".{os.getpid()}.tmp")
         tmp.write_text(text)
         os.replace(tmp, path)
-    return Scene(path, build, specialize=specialize, plugins=places, **defaults)
+    try:
+        return Scene(path, build, specialize=specialize, plugins=places, **defaults)
+    except CompileError as e:
+        raise dict_error(e, path) from None

@@ -13,12 +13,16 @@ gets every check, conversion and error message an XML scene gets:
   is a transform; a relative ``filename`` is resolved against the current folder, as
   Mitsuba does.
 
-A mistake is an error naming the key path (``scene['floor']['bsdf']``).
+A mistake is an error naming the key path (``scene['floor']['bsdf']``): each element of the
+XML ends with a comment naming its key, by which :func:`dict_error` turns an error the scene
+loader reports at a line of the XML into one at the key.
 """
 
 from __future__ import annotations
 
+import difflib
 import os
+import re
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
@@ -27,10 +31,11 @@ from xml.sax.saxutils import quoteattr
 import numpy as np
 
 from . import transform as xf
-from .errors import scene_error
+from ...compiler.diagnostics import CompileError, Diagnostic, source_line
+from .errors import SceneError, scene_error
 from .spectrum_plugins import PLUGINS as SPECTRUM_PLUGINS
 
-__all__ = ["Transform4f", "dict_to_xml"]
+__all__ = ["Transform4f", "dict_error", "dict_to_xml"]
 
 
 def _error(message: str) -> Exception:
@@ -38,6 +43,30 @@ def _error(message: str) -> Exception:
     return scene_error(message, None)
 
 _VALUE_TYPES = ("rgb", "spectrum", "ref")
+_KEY = re.compile(r"^(?P<xml>.*?)\s*<!-- (?P<key>scene\[.*\]) -->$")
+
+
+def _keyed(line: str, path: str) -> str:
+    """An element's line with the comment naming its key path (``--`` cannot be in one)."""
+    return f"{line}  <!-- {path.replace('--', '- -')} -->"
+
+
+def dict_error(e: CompileError, xml: Path) -> CompileError:
+    """``e`` with its diagnostics at lines of ``xml`` (what :func:`dict_to_xml` wrote) moved
+    to the dictionary's keys: ``load_dict: scene['a']['bsdf']['alpha']: ...``; the user never
+    wrote that file, so a line of it tells them nothing."""
+    moved = []
+    for d in e.diagnostics:
+        line = source_line(d.loc.file, d.loc.line) if d.loc and d.loc.file == str(xml) else None
+        m = _KEY.match(line.strip()) if line else None
+        if m is None:
+            moved.append(d)
+            continue
+        moved.append(Diagnostic(None, f"load_dict: {m['key']}: {d.message} (written as the "
+                                      f"scene XML `{m['xml']}`)", d.severity))
+    if all(a is b for a, b in zip(moved, e.diagnostics)):
+        return e
+    return SceneError(moved)
 
 
 class _either:
@@ -149,9 +178,13 @@ class _Writer:
 
     def item(self, key: str, value: Any, path: str, top: bool = False,
              indent: int = 1) -> list[str]:
-        pad = "    " * indent
         if isinstance(value, Mapping):
             return self.mapping(key, value, path, top, indent)
+        return [_keyed(line, path) for line in self.plain(key, value, path, indent)]
+
+    def plain(self, key: str, value: Any, path: str, indent: int) -> list[str]:
+        """A property that is not a dict: one line."""
+        pad = "    " * indent
         if isinstance(value, bool):
             return [f'{pad}<boolean name={quoteattr(key)} value="{str(value).lower()}"/>']
         if isinstance(value, (int, np.integer)):
@@ -184,19 +217,22 @@ class _Writer:
         if not isinstance(ptype, str):
             raise _error(f"load_dict: {path}: a nested dict needs a \"type\"")
         if ptype in _VALUE_TYPES:
-            return [pad + self.value(key, ptype, value, path)]
+            return [_keyed(pad + self.value(key, ptype, value, path), path)]
         if ptype in SPECTRUM_PLUGINS and not top:  # {"type": "blackbody", ...}
             return self.spectrum_plugin(key, ptype, value, path, indent)
         category = self.categories.get(ptype)
         if category is None:
-            raise _error(f"load_dict: {path}: unknown plugin type {ptype!r}")
+            near = difflib.get_close_matches(ptype, list(self.categories), n=3)
+            raise _error(f"load_dict: {path}: unknown plugin type {ptype!r}"
+                         + (f" (did you mean {', '.join(map(repr, near))}?)" if near else "")
+                         + "; user plugins are found in the current folder and in `plugins=`")
         ident = value.get("id", key if top else None)
         attrs = f" type={quoteattr(ptype)}"
         if ident is not None:
             attrs += f" id={quoteattr(str(ident))}"
         if not top and key != category:
             attrs += f" name={quoteattr(key)}"
-        lines = [f"{pad}<{category}{attrs}>"]
+        lines = [_keyed(f"{pad}<{category}{attrs}>", path)]
         for k, v in value.items():
             if k not in ("type", "id"):
                 lines += self.item(k, v, f"{path}[{k!r}]", indent=indent + 1)
@@ -208,7 +244,8 @@ class _Writer:
         """One of Mitsuba's spectrum plugins (``<spectrum type=... name=...>``); an srgb
         ``color`` given as 3 numbers is an ``<rgb>``, a list of ``values`` or ``wavelengths``
         the comma-separated string Mitsuba's XML takes."""
-        lines = [f"{'    ' * indent}<spectrum type={quoteattr(ptype)} name={quoteattr(key)}>"]
+        lines = [_keyed(f"{'    ' * indent}<spectrum type={quoteattr(ptype)} "
+                        f"name={quoteattr(key)}>", path)]
         for k, v in value.items():
             if k == "type":
                 continue

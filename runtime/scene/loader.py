@@ -242,6 +242,14 @@ class _Builder(ShapeFinisher, Finishers):
                                    *self.registry.user_names(node.category)])
             hint = (f" (no .rdsl file next to the scene or in the plugin folders declares "
                     f"`{node.category} {node.type}`)" if node.category in PLUGIN_KINDS else "")
+            other = next(((k, d) for k in PLUGIN_KINDS if k != node.category
+                          for d in self.registry.candidates(k, node.type)[:1]), None)
+            if other is not None and node.category in PLUGIN_KINDS:
+                k, d = other
+                hint = (f"; `{node.type}` is declared as {_article(k)} {k} plugin at "
+                        f"{d.where}, not as {_article(node.category)} {node.category} "
+                        f"plugin: {_article(node.category)} <{node.category}> needs "
+                        f"`{node.category} {node.type} {{`")
             raise scene_error(f"unknown {node.category} plugin '{node.type}'; accepted: "
                               f"{', '.join(names)}{hint}", node.loc)
         decl = spec.decl
@@ -322,6 +330,9 @@ class _Builder(ShapeFinisher, Finishers):
                               f"{KIND_NAMES[p.kind]}, got {got}{_declared(name, p)}", loc)
         if kind == "texture":
             return self.instantiate(value)
+        if p.rdsl_type in ("UInt", "UInt64") and value < 0:
+            raise scene_error(f"parameter '{name}' of {self.what(node)} is unsigned, so it "
+                              f"cannot be {value}{_declared(name, p)}", loc)
         if p.kind == "float":
             return float(value)
         if p.kind == "vec3":
@@ -363,6 +374,10 @@ class _Builder(ShapeFinisher, Finishers):
         loc = node.props[name].loc if name in node.props else node.loc
         return self.tree.resolve_file(_param_str(node, name), node.base_dir,
                                       f"{self.what(node)}: {what}", loc)
+
+
+def _article(word: str) -> str:
+    return "an" if word[0] in "aeiou" else "a"
 
 
 def _declared(name: str, p: Param) -> str:

@@ -70,12 +70,6 @@ def choose(path: Path, wanted: str | None) -> Declaration:
         raise CompileError(f"`rdsl test-plugin` tests {', '.join(KINDS)} and integrator "
                            "plugins, not "
                            f"{decl.kind} `{decl.name}`", _at(path, decl.line, 1))
-    if decl.kind == "texture" and "eval_1" not in decl.methods:
-        # the interface asks for eval() alone, but the renderer's texture dispatch
-        # (specialize) calls eval_1 of every texture in a scene
-        raise CompileError(f"texture `{decl.name}` has no `fn eval_1(si: Surface) -> Float` "
-                           "(the one value a Float parameter reads, e.g. the luminance of "
-                           "eval); the renderer needs it", _at(path, decl.line, 1))
     return decl
 
 
@@ -85,8 +79,11 @@ def _value(text: str, ptype: str) -> Any:
         if text.lower() not in ("true", "false", "1", "0"):
             raise ValueError
         return text.lower() in ("true", "1")
-    if ptype == "Int":
-        return int(text)
+    if ptype in ("Int", "UInt", "UInt64"):
+        n = int(text)
+        if n < 0 and ptype != "Int":
+            raise ValueError
+        return n
     if ptype == "Float":
         return float(text)
     if ptype in ("Spectrum", "Texture"):
@@ -121,8 +118,8 @@ def parse_params(items: list[str], decl: Declaration) -> dict[str, Any]:
         try:
             out[name] = _value(text.strip(), p.type)
         except ValueError:
-            raise CompileError(f"-p {item}: param `{name}` ({p.loc}) is a {p.type}; "
-                               f"`{text}` is not one") from None
+            raise CompileError(f"-p {item}: param `{name}` ({p.loc}) is declared "
+                               f"`{p.type}`; `{text}` is not a `{p.type}` value") from None
     return out
 
 

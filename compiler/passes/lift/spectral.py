@@ -222,9 +222,12 @@ class Spectral:
                 out = b.op(Op.MUL, v4, out, self.vec(b, scale))
             return out
         if not all(isinstance(v.owner, Instr) and v.owner.op is Op.LOAD for v in ops):
-            raise CompileError([Diagnostic(ins.loc, "the spectral variant upsamples constant "
-                                           "colours and colours read from the scene's "
-                                           "buffers only; this one is computed")])
+            raise CompileError([Diagnostic(
+                ins.loc, "the spectral variant upsamples constant colours and colours read "
+                "from the scene's buffers only; this one is computed (in a plugin, from "
+                "`Float` params: constants in the specialized build only, not with "
+                "--no-specialize or --watch; make the colour a `Spectrum` param, which the "
+                "runtime upsamples)")])
         out = self.sigmoid_poly(b, ins, ops[:3])
         if illuminant:
             out = b.op(Op.MUL, v4, out, self.d65(b, ins))
