@@ -54,9 +54,9 @@ TARGETS: dict[str, Target] = {
                ("sse4.2", "popcnt"), 128),
         # +fast-gather: LLVM's Haswell tuning scalarizes every gather (its cost model
         # trusts AVX2 gathers on Skylake and later only), 8 extracts, loads and inserts
-        # each; with vgatherdps the matpreview_diffuse kernel is a third smaller and
-        # renders in 0.6x the CPU time on an AVX2 AMD EPYC (Zen 3), bit for bit the same
-        # image (docs/bench.md, "AVX2 gathers")
+        # each; with vgatherdps the matpreview_diffuse kernel is a third smaller and the
+        # scene set renders in 0.74x the CPU time (geometric mean) on an AVX2-only AMD
+        # EPYC (Zen 3), bit for bit the same images (docs/bench.md, stop 31)
         Target("avx2", 8, "haswell", "+avx,+avx2,+fma,+bmi,+bmi2,+f16c,+popcnt,+fast-gather",
                ("avx2", "fma", "bmi2"), 256),
         Target("avx512", 16, "skylake-avx512",

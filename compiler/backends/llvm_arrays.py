@@ -33,7 +33,8 @@ Earlier, on ``bench/ggx_kernel.rdsl`` (4M samples, one thread, median CPU time o
 per component, AVX-512 / AVX2: wide loads and shuffles +4% / +13%, gathers +6% / +23%;
 writing a C-order ``(N, 4)`` ``out=`` as well: wide masked stores +14% / +21%, scatters
 +34% / +36%.  In earlier runs per-lane loads and inserts were 37% slower than gathers on
-AVX-512 (equal on AVX2), and gathers with 32-bit lane offsets 5% faster than 64-bit ones on
+AVX-512 (equal on AVX2, where LLVM scalarized the gathers itself until the avx2 target got
+``+fast-gather``: these AVX2 numbers are from before it), and gathers with 32-bit lane offsets 5% faster than 64-bit ones on
 AVX-512 only; just the 64-bit form is kept (no range check, less code to compile).
 Branching per access inside the contiguous loops cost AVX2 10 to 16%, hence their own copy.
 Loads and stores of strided arrays assume no alignment (align 1).
