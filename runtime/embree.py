@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import contextlib
 import ctypes
+import os
 import threading
 from collections.abc import Sequence
 from typing import Any
@@ -170,12 +171,19 @@ class EmbreeDevice:
 _default_device: EmbreeDevice | None = None
 
 
+# Embree's device configuration for the process-wide device (``rtcNewDevice``'s string, for
+# example ``isa=avx2``: Embree's AVX2 kernels on an AVX-512 CPU, as the bit-identical test
+# uses to reproduce an AVX2-only host's images; ``verbose=1``)
+CONFIG_ENV = "RDSL_EMBREE_CONFIG"
+
+
 def default_device() -> EmbreeDevice:
-    """The process-wide device (Embree devices own a thread pool: share one)."""
+    """The process-wide device (Embree devices own a thread pool: share one), configured by
+    ``$RDSL_EMBREE_CONFIG`` when set."""
     global _default_device
     with _lib_lock:
         if _default_device is None:
-            _default_device = EmbreeDevice()
+            _default_device = EmbreeDevice(os.environ.get(CONFIG_ENV, ""))
         return _default_device
 
 

@@ -9,14 +9,19 @@ The test renders with the host's widest target, and the table keeps one set of h
 target, each recorded on a host whose widest target it is: the same kernel gives other
 bits on another kind of host, since Embree (its BVH and intersectors) and numpy (the scene's
 transforms) choose their code by the CPU they run on, not by rdsl's target. ``--update``
-writes the entries of this host's own target and keeps the others, so the table is
-regenerated on an AVX-512 host and on an AVX2-only one.
+writes the entries of this host's own target and keeps the others.  An AVX-512 host can
+also stand in for an AVX2-only one: with Embree's AVX2 kernels (``RDSL_EMBREE_CONFIG=isa=avx2``)
+and numpy's AVX2 code (``NPY_DISABLE_CPU_FEATURES``), the ``avx2`` target's renders give the
+bits an AVX2-only host recorded (checked below for two cases; all eight matched when this
+was written), so ``--update --as avx2`` regenerates those entries there too.
 """
 
 from __future__ import annotations
 
 import hashlib
 import json
+import os
+import subprocess
 import sys
 from pathlib import Path
 
@@ -28,6 +33,10 @@ ROOT = Path(__file__).resolve().parents[1]
 MATERIALS = ROOT / "bench" / "scenes" / "materials.xml"
 TABLE = Path(__file__).with_name("golden") / "images" / "hashes.json"
 TARGETS = ("avx512", "avx2")
+# the environment that makes an AVX-512 host render as an AVX2-only one (set before numpy
+# and Embree load: a fresh process)
+STAND_IN = {"avx2": {"RDSL_EMBREE_CONFIG": "isa=avx2",
+                     "NPY_DISABLE_CPU_FEATURES": "X86_V4 AVX512_ICL AVX512_SPR"}}
 
 # (name, scene, variant, specialize)
 CASES = [
@@ -71,13 +80,51 @@ def test_image_is_bit_identical(name, scene_path, variant, specialize):
     assert render_hash(scene_path, variant, specialize, target) == expected
 
 
+def _stand_in_hashes(target: str, keys: list[str]) -> dict[str, str]:
+    """The hashes of ``keys`` rendered in a fresh process made to run as a ``target`` host."""
+    env = dict(os.environ, **STAND_IN[target])
+    out = subprocess.run([sys.executable, __file__, "--hash", *keys], env=env, check=True,
+                         capture_output=True, text=True, cwd=Path(__file__).parent).stdout
+    return dict(line.split() for line in out.splitlines() if line.strip())
+
+
+def test_an_avx512_host_reproduces_the_avx2_hosts_images():
+    """The avx2 entries, recorded on an AVX2-only host, checked on an AVX-512 one: the same
+    kernels with Embree's and numpy's AVX2 code give the same bits (so an AVX-512 host
+    checks, and can regenerate, both targets' entries)."""
+    pytest.importorskip("rdsl.runtime.embree")
+    if _host_target() != "avx512":
+        pytest.skip("needs an AVX-512 host, which stands in for an AVX2-only one")
+    keys = [key("cbox", "rgb", True, "avx2"), key("materials", "rgb", True, "avx2")]
+    table = json.loads(TABLE.read_text())
+    assert _stand_in_hashes("avx2", keys) == {k: table[k] for k in keys}
+
+
+def _cases_by_key() -> dict[str, tuple]:
+    return {key(n, v, sp, t): (p, v, sp, t) for n, p, v, sp in CASES for t in TARGETS}
+
+
+if __name__ == "__main__" and "--hash" in sys.argv:  # KEY ...: print "KEY HASH" lines
+    cases = _cases_by_key()
+    for k in sys.argv[sys.argv.index("--hash") + 1:]:
+        print(k, render_hash(*cases[k]), flush=True)
+
 if __name__ == "__main__" and "--update" in sys.argv:
     host = _host_target()
-    if host is None:
+    if "--as" in sys.argv:  # --as avx2 on an AVX-512 host
+        want = sys.argv[sys.argv.index("--as") + 1]
+        if want not in STAND_IN or host != "avx512":
+            sys.exit(f"--as takes one of {sorted(STAND_IN)}, on an AVX-512 host")
+        keys = [k for k in _cases_by_key() if k.endswith("/" + want)]
+        fresh = _stand_in_hashes(want, keys)
+    elif host is None:
         sys.exit(f"this machine runs none of {TARGETS}")
+    else:
+        fresh = {key(name, variant, specialize, host):
+                 render_hash(path, variant, specialize, host)
+                 for name, path, variant, specialize in CASES}
     table = json.loads(TABLE.read_text()) if TABLE.is_file() else {}
-    for name, path, variant, specialize in CASES:
-        k = key(name, variant, specialize, host)
-        table[k] = render_hash(path, variant, specialize, host)
-        print(k, table[k])
+    for k, h in fresh.items():
+        table[k] = h
+        print(k, h)
     TABLE.write_text(json.dumps(table, indent=1, sort_keys=True) + "\n")
