@@ -118,11 +118,14 @@ def test_a_covering_tape_flags_the_lanes_it_does_not_cover():
         words[:] = -1
         rows = (i // TAPE_LANES) * TAPE_LANES * floats + i % TAPE_LANES
         grads = []
-        for lane in lanes:  # one sample's gradient row at a time (they all share PRM)
-            grad = np.zeros(NPRM, np.float32)
+        # one sample's gradient at a time; each lane adds into a gradient row of its own, as
+        # the ABI asks (no two lanes write one element), and the rows are summed
+        own = (np.arange(x.size) * NPRM).astype(np.int32)
+        for lane in lanes:
+            grad = np.zeros(NPRM * x.size, np.float32)
             mask = np.arange(x.size) == lane
-            k(x, prm, a * mask, grad, np.zeros(x.size, np.int32), tape, rows)
-            grads.append(grad)
+            k(x, prm, a * mask, grad, own, tape, rows)
+            grads.append(grad.reshape(x.size, NPRM).sum(0))
         return np.array(grads), words.reshape(-1)[:x.size].copy()
 
     every = np.arange(x.size)

@@ -440,7 +440,7 @@ def _gather_or_load(lw: Lowering, base: L.Value, idx: L.Value, ptrs: L.Value, m:
     batch of samples) take the load; other indices pay a compare and a branch, so indices
     read from memory (a triangle's vertices) skip the check."""
     b = lw.b
-    first, contiguous = _consecutive(lw, idx, vty.count)
+    first, contiguous = _consecutive(lw, idx, vty.count, m)
     load_bb = b.append_basic_block("contiguous")
     gather_bb = b.append_basic_block("gather")
     join_bb = b.append_basic_block("gathered")
@@ -461,14 +461,26 @@ def _gather_or_load(lw: Lowering, base: L.Value, idx: L.Value, ptrs: L.Value, m:
     return r
 
 
-def _consecutive(lw: Lowering, idx: L.Value, W: int) -> tuple[L.Value, L.Value]:
-    """Lane 0's index and whether ``idx[k] == idx[0] + k`` for every lane k (i32 indices)."""
+def _consecutive(lw: Lowering, idx: L.Value, W: int, mask: L.Value
+                 ) -> tuple[L.Value, L.Value]:
+    """The index lane 0 would have, ``first``, and whether every active lane k of ``mask``
+    has ``idx[k] == first + k`` (i32 indices): then a masked vector access at ``first``
+    touches exactly the active lanes' elements.  Inactive lanes are not compared, so a
+    packet whose finished lanes kept stale indices (a loop's lanes leave it at different
+    iterations: the adjoint's tape slots) still takes the vector access; ``first`` comes
+    from the first active lane (any value when none is: nothing is accessed then)."""
     b = lw.b
-    first = b.extract_element(idx, const(I32, 0))
     iota = L.Constant(L.VectorType(I32, W), [L.Constant(I32, k) for k in range(W)])
-    step = b.icmp_signed("==", idx, b.add(lw.m.splat(b, first, W), iota))
-    bits = b.bitcast(step, L.IntType(W))
-    return first, b.icmp_signed("==", bits, L.Constant(L.IntType(W), -1))
+    bits_ty = L.IntType(W)
+    active = b.bitcast(mask, bits_ty)
+    lead = lw.call(f"llvm.cttz.i{W}", bits_ty, active, L.Constant(L.IntType(1), 0))
+    lane = b.and_(lead, L.Constant(bits_ty, W - 1))  # W (no lane active) -> lane 0
+    lane32 = b.zext(lane, I32) if W < 32 else b.trunc(lane, I32) if W > 32 else lane
+    first = b.sub(b.extract_element(idx, lane32), lane32)
+    same = b.icmp_signed("==", idx, b.add(lw.m.splat(b, first, W), iota))
+    ok = b.or_(same, b.xor(mask, L.Constant(mask.type, [L.Constant(L.IntType(1), 1)] * W)))
+    bits = b.bitcast(ok, bits_ty)
+    return first, b.icmp_signed("==", bits, L.Constant(bits_ty, -1))
 
 
 def _lower_scatter(lw: Lowering, ins: ir.Instr) -> None:
@@ -489,7 +501,7 @@ def _lower_scatter(lw: Lowering, ins: ir.Instr) -> None:
     # as _gather_or_load: a masked vector store where the indices turn out consecutive (the
     # adjoint's per-lane tape rows, interleaved: passes/ad_checkpoint.py)
     b = lw.b
-    first, contiguous = _consecutive(lw, lw.v(idx), m.type.count)
+    first, contiguous = _consecutive(lw, lw.v(idx), m.type.count, m)
     with b.if_else(contiguous) as (store, other):
         with store:
             p0 = b.gep(lw.v(buf), [b.sext(first, I64)], source_etype=mty)

@@ -79,6 +79,10 @@ class Checkpoints:
             self.size += (self.cap + 1) * len(floats)
             self.slots[id(ins)] = slot
 
+    def taped(self, loop: Instr) -> bool:
+        """Whether ``loop``'s carried state is on the tape."""
+        return id(loop) in self.loops
+
     def load(self, ins: Instr, k: Value, b: Builder) -> tuple[list[Value], Value] | None:
         """For taped loop ``ins``: its carried values at checkpoint c = min(k, C - 1) and
         k - c, the iterations left to run from there to reach iteration k (else None).

@@ -25,7 +25,9 @@ an active result also yields every value its branches compute (DCE later drops t
 adjoint does not read); its adjoint is an ``if`` on the same condition whose branches sweep
 the branch backwards, reading those values.  A ``loop``: the primal loop counts its
 iterations N, and the adjoint loop runs k = N-1 .. 0, each time getting the carried state
-before iteration k, then running the body once more forward and its sweep.  In a build
+before iteration k, then running the body once more forward and its sweep (with a
+covering tape, k = C-1 .. 0 in every lane, the iterations k >= N idle: the lanes of a
+packet then read the same tape slot together, as vectors).  In a build
 with ``tape`` = C > 0 the primal loop checkpoints its carried state before iterations
 0 .. C-1 per lane (in ``ad_tape`` at row ``ad_row_tape``, two more kernel arguments:
 passes/ad_checkpoint.py) and the adjoint loads it for k < C, beyond recomputing the body
@@ -404,22 +406,36 @@ class _Reverse:
         ads = [Value(F32, f"ad.{body.args[i].name or i}") for i in hot]
         ab = Block([k, *ads])
         rb = Builder(ab, ins.loc)
-        state = self._state_at(ins, k, rb)
+        # a covering tape holds every iteration: the adjoint runs k = C-1 .. 0 for every
+        # lane, each lane's iterations k < trips doing the work, so that the lanes of a
+        # packet are at the same k and load their slots as vectors (one slot per k; with
+        # k = trips-1 .. 0 the lanes of different trips gather from different slots)
+        aligned = self.tape.covers and self.tape.taped(ins)
+        ib = Block() if aligned else ab
+        wb = Builder(ib, ins.loc) if aligned else rb
+        state = self._state_at(ins, k, wb)
         self.varied.update(state[i] for i in hot)
         local, m, defined, fwd = self.region(
-            body, state, {1 + i: a for i, a in zip(hot, ads)}, rb)
+            body, state, {1 + i: a for i, a in zip(hot, ads)}, wb)
         carried = set(state)
         free = [v for v in local if v not in defined and v not in carried]
         sums = [Value(F32, "ad.sum") for _ in free]
         for s in sums:
             s.owner = ab
         ab.args += sums
+        out = [*[local.get(state[i]) or wb.const(0.0, F32) for i in hot],
+               *[wb.op(Op.ADD, F32, s, local[v]) for s, v in zip(sums, free)]]
+        if aligned:
+            wb.yield_(*out)
+            idle = Block()
+            Builder(idle, ins.loc).yield_(*ads, *sums)
+            out = rb.emit(Op.IF, [rb.op(Op.LT, BOOL, k, trips)], [F32] * len(out),
+                          regions=[ib, idle]).results
         more = rb.op(Op.GT, BOOL, k, rb.const(0, I32))
-        rb.yield_(more, rb.op(Op.SUB, I32, k, rb.const(1, I32)),
-                  *[local.get(state[i]) or rb.const(0.0, F32) for i in hot],
-                  *[rb.op(Op.ADD, F32, s, local[v]) for s, v in zip(sums, free)])
+        rb.yield_(more, rb.op(Op.SUB, I32, k, rb.const(1, I32)), *out)
         zero = b.const(0.0, F32)
-        first = b.op(Op.SUB, I32, trips, b.const(1, I32))
+        first = b.const(self.tape.cap - 1, I32) if aligned else \
+            b.op(Op.SUB, I32, trips, b.const(1, I32))
         operands = [first, *[seeds.get(i) or zero for i in hot], *[zero] * len(free)]
         types = [I32, *[F32] * (len(hot) + len(free))]
         ok = self.tape.guard(ins, trips, b)  # covers: a lane that overflowed skips it
@@ -433,7 +449,7 @@ class _Reverse:
             ob.yield_(*[ob.const(0.0, F32)] * (len(types) - 1))
             res = b.emit(Op.IF, [ok], types[1:], regions=[then, other]).results
         # a taped loop: iteration k < C loads what its sweep reads instead of running fwd
-        self.tape.keep(ins, ab, fwd, k, {c: o for o, c in m.items()})
+        self.tape.keep(ins, ib, fwd, k, {c: o for o, c in m.items()})
         for i, r in zip(hot, res):
             self.acc(adj, init[i], r, b)
         back = {v: k for k, v in self.sub.items()}  # exported results -> their values
