@@ -120,9 +120,7 @@ if __name__ == "__main__" and "--update" in sys.argv:
     elif host is None:
         sys.exit(f"this machine runs none of {TARGETS}")
     else:
-        fresh = {key(name, variant, specialize, host):
-                 render_hash(path, variant, specialize, host)
-                 for name, path, variant, specialize in CASES}
+        fresh = {k: render_hash(*c) for k, c in _cases_by_key().items() if c[3] == host}
     table = json.loads(TABLE.read_text()) if TABLE.is_file() else {}
     for k, h in fresh.items():
         table[k] = h

@@ -471,15 +471,13 @@ def _consecutive(lw: Lowering, idx: L.Value, W: int, mask: L.Value
     from the first active lane (any value when none is: nothing is accessed then)."""
     b = lw.b
     iota = L.Constant(L.VectorType(I32, W), [L.Constant(I32, k) for k in range(W)])
-    bits_ty = L.IntType(W)
-    active = b.bitcast(mask, bits_ty)
-    lead = lw.call(f"llvm.cttz.i{W}", bits_ty, active, L.Constant(L.IntType(1), 0))
-    lane = b.and_(lead, L.Constant(bits_ty, W - 1))  # W (no lane active) -> lane 0
-    lane32 = b.zext(lane, I32) if W < 32 else b.trunc(lane, I32) if W > 32 else lane
-    first = b.sub(b.extract_element(idx, lane32), lane32)
+    bits_ty = L.IntType(W)  # W <= 16: a lane mask's bits fit an i32
+    active = b.zext(b.bitcast(mask, bits_ty), I32)
+    lead = lw.call("llvm.cttz.i32", I32, active, L.Constant(L.IntType(1), 0))
+    lane = b.and_(lead, const(I32, W - 1))  # 32 (no lane active) -> lane 0
+    first = b.sub(b.extract_element(idx, lane), lane)
     same = b.icmp_signed("==", idx, b.add(lw.m.splat(b, first, W), iota))
-    ok = b.or_(same, b.xor(mask, L.Constant(mask.type, [L.Constant(L.IntType(1), 1)] * W)))
-    bits = b.bitcast(ok, bits_ty)
+    bits = b.bitcast(b.or_(same, b.not_(mask)), bits_ty)
     return first, b.icmp_signed("==", bits, L.Constant(bits_ty, -1))
 
 
