@@ -61,12 +61,21 @@ def instrument() -> None:
 
 
 def main() -> None:
-    instrument()
-    from _sheet import rdsl_images
     from _suite import BY_NAME
 
+    if len(sys.argv) != 2 or sys.argv[1] in ("-h", "--help"):
+        sys.exit(f"usage: python bench/compile_phases.py SHEET[,SHEET...]\n"
+                 f"sheets: {', '.join(sorted(BY_NAME))}")
+    names = sys.argv[1].split(",")
+    unknown = [n for n in names if n not in BY_NAME]
+    if unknown:
+        sys.exit(f"no compat sheet {', '.join(map(repr, unknown))}; the sheets: "
+                 f"{', '.join(sorted(BY_NAME))}")
+    instrument()
+    from _sheet import rdsl_images
+
     t0 = time.process_time()
-    for name in sys.argv[1].split(","):
+    for name in names:
         t = time.process_time()
         rdsl_images(BY_NAME[name])
         print(f"{name}: {time.process_time() - t:.2f} s", flush=True)

@@ -127,6 +127,18 @@ def test_params_and_render_forward_mistakes():
         scene.params["red.reflectance"] = [0.1, 0.2]
     with pytest.raises(ValueError, match="tangent of `red.reflectance` has 3"):
         scene.render_forward("red.reflectance", tangent=[1.0, 0.0])
+    with pytest.raises(ValueError, match="`red.reflectance`: expected a number or an array "
+                                         "of numbers, got 'red'"):
+        scene.params["red.reflectance"] = "red"
+    # the integrator's Int and Bool params are whole numbers (a bounce count of 2.5 was
+    # truncated by the kernel's cast); they stay as they were
+    for name, bad in (("path.max_depth", 2.5), ("path.rr_depth", float("nan"))):
+        before = scene.params[name].copy()
+        with pytest.raises(ValueError, match=f"`{name}` is a whole-number setting"):
+            scene.params[name] = bad
+        np.testing.assert_array_equal(scene.params[name], before)
+    scene.params["path.max_depth"] = 3
+    assert scene.params["path.max_depth"][0] == 3
     spectral = rdsl.load_scene(CBOX, variant="spectral", res=8, spp=1)
     assert spectral.params["red.reflectance"].shape == (4,)
     with pytest.raises(ValueError, match="holds 4 value.*coefficients and a scale"):

@@ -347,6 +347,12 @@ def test_backward_mistakes_are_clear_errors():
         scene.backward(np.zeros((8, 8, 3)), params=["red.albedo"])
     with pytest.raises(CompileError, match="`path.max_depth` is an integer setting"):
         scene.backward(np.zeros((8, 8, 3)), params=["path.max_depth"])
+    for bad in ({"spp": 0}, {"spp": -2}, {"spp": 1.5}, {"seed": -1}, {"seed": 1 << 32}):
+        what = next(iter(bad))
+        with pytest.raises(ValueError, match=f"{what}: expected a whole number"):
+            scene.backward(np.zeros((8, 8, 3)), params=["red.reflectance.value"], **bad)
+        with pytest.raises(ValueError, match=f"{what}: expected a whole number"):
+            scene.render(**bad)
     device = rdsl.load_scene(CBOX, res=8, spp=1, target="opencl")
     with pytest.raises(CompileError, match="CPU targets.*not on `opencl`.*target='host'"):
         device.backward(np.zeros((8, 8, 3)), params=["red.reflectance.value"])

@@ -153,3 +153,28 @@ def test_thread_count_is_checked(command: str, threads: str, tmp_path: Path):
     assert "Traceback" not in r.stderr
     assert f"argument --threads: expected a number of threads, 1 or more, got `{threads}`" \
         in r.stderr
+
+
+@pytest.mark.parametrize("flag,value,expected", [
+    ("--spp", "0", "expected a number of samples per pixel, 1 or more, got `0`"),
+    ("--spp", "-3", "expected a number of samples per pixel, 1 or more, got `-3`"),
+    ("--spp", "2.5", "expected a number of samples per pixel, 1 or more, got `2.5`"),
+    ("--seed", "-1", "expected a whole number in 0 .. 4294967295, got `-1`"),
+    ("--seed", "4294967296", "expected a whole number in 0 .. 4294967295, got `4294967296`"),
+])
+def test_sample_count_and_seed_are_checked(flag: str, value: str, expected: str,
+                                           tmp_path: Path):
+    """A count below 1 rendered a black image (and wrote it over the last one) and 0 meant
+    the scene's count; a negative seed failed in numpy with a traceback.  Both are usage
+    errors now, before any scene is read, and nothing is written."""
+    r = rdsl("render", str(tmp_path / "missing.xml"), flag, value, cwd=tmp_path)
+    assert r.returncode == 2
+    assert "Traceback" not in r.stderr
+    assert f"argument {flag}: {expected}" in r.stderr
+    assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize("command", ["render", "bench"])
+def test_a_folder_is_not_a_scene(command: str, tmp_path: Path):
+    r = rdsl(command, str(tmp_path))
+    assert_user_error(r, f"{tmp_path}: is a folder; expected a Mitsuba 3 XML scene file")

@@ -239,6 +239,8 @@ def test_root_and_version_errors(tmp_path: Path) -> None:
         load(p)
     with pytest.raises(SceneError, match="scene file .* not found"):
         load(tmp_path / "missing.xml")
+    with pytest.raises(SceneError, match="is a folder; expected a Mitsuba 3 XML scene file"):
+        load(tmp_path)
 
 
 def test_errors_in_included_file_name_that_file(tmp_path: Path) -> None:

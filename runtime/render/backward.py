@@ -24,8 +24,7 @@ of ``render_forward``'s derivative image with ``d_img`` (tests/test_ad_reverse.p
 from __future__ import annotations
 
 import os
-from concurrent.futures import ThreadPoolExecutor
-from functools import partial
+from functools import lru_cache, partial
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -34,7 +33,8 @@ from ...compiler.build import elimination_threshold
 from ...compiler.diagnostics import CompileError
 from ...compiler.passes.ad_checkpoint import OVERFLOW, TAPE_LANES
 from ...core.scene_spec import Slot
-from ..scene.samplers import sample_count
+from ..kernel import _pool
+from ..scene.samplers import requested_samples, sample_count
 from .differentiable import Texels, _lookup, ad_twin, adjoint_seeds, integrator_names
 from .film import film_reach, film_uniforms
 from .kernel_source import SCENE_BUFFERS, batch_row
@@ -137,8 +137,8 @@ def backward(scene: Scene, d_img: Any, params: list[str], spp: int | None = None
     from .renderer import BATCH_SAMPLES
 
     d, chosen = _check(scene, d_img, params)
-    spp = sample_count(scene.desc.sensor.sampler, int(spp or scene.spp))
-    seed = scene.seed if seed is None else int(seed)
+    spp, seed = requested_samples(spp, seed, scene.spp, scene.seed)
+    spp = sample_count(scene.desc.sensor.sampler, spp)
     scene.use_generic()
     covers = tape_covers(scene, tape)
     twin = ad_twin(scene, "reverse", elimination_threshold("reverse", eliminate), tape,
@@ -235,29 +235,23 @@ class _Parts:
         self.gPRM = np.zeros(rows * prm.size, np.float32)
         self.gT = np.zeros(rows * T.size if texels else T.size, np.float32)
 
-    def _bounds(self, n: int) -> list[tuple[int, int]]:
-        per = -(-n // self.parts)  # ceil: parts of whole packets
-        step = -(-per // LANES) * LANES
-        return [(lo, min(lo + step, n)) for lo in range(0, n, step)]
-
     def rows(self, n: int, size: int, interleaved: bool = False) -> np.ndarray:
         """The first element of each sample's row, in a buffer of rows of ``size``; with
         ``interleaved`` (the tape's: compiler/passes/ad_checkpoint.py) lane k of a part's
-        block starts at ``k`` and its value j is ``TAPE_LANES`` further on each time."""
-        rows = np.empty(n, np.int32)
-        for p, (lo, hi) in enumerate(self._bounds(n)):
-            lane = np.arange(hi - lo) % LANES
-            rows[lo:hi] = p * LANES * size + (lane if interleaved else lane * size)
-        return rows
+        block starts at ``k`` and its value j is ``TAPE_LANES`` further on each time.
+        (Read-only: the same arrays serve every pass of the same shape.)"""
+        return _rows(self.parts, n, size, interleaved)
 
     def run(self, call, n: int) -> None:
-        """``call(lo, hi)`` over the parts of [0, n), on ``threads`` threads."""
+        """``call(lo, hi)`` over the parts of [0, n), on ``threads`` threads (the kernels'
+        long-lived pool: each part calls its kernel with ``threads=1``, on the pool's
+        thread, so no part waits for another's task)."""
         if self.parts == 1:
             call(0, n)
             return
-        with ThreadPoolExecutor(self.threads) as pool:
-            for f in [pool.submit(call, lo, hi) for lo, hi in self._bounds(n)]:
-                f.result()
+        pool = _pool(self.threads)
+        for f in [pool.submit(call, lo, hi) for lo, hi in _bounds(self.parts, n)]:
+            f.result()
 
     def gradient(self, chosen: Slot | Texels) -> np.ndarray:
         if isinstance(chosen, Texels):
@@ -266,3 +260,21 @@ class _Parts:
             return np.asarray(g, np.float32).reshape(chosen.shape)
         total = self.gPRM.reshape(self.parts * LANES, -1).sum(0, dtype=np.float64)
         return total[chosen.offset:chosen.offset + chosen.size].astype(np.float32)
+
+
+def _bounds(parts: int, n: int) -> list[tuple[int, int]]:
+    """[lo, hi) of each of ``parts`` parts of [0, n), of whole packets."""
+    per = -(-n // parts)  # ceil
+    step = -(-per // LANES) * LANES
+    return [(lo, min(lo + step, n)) for lo in range(0, n, step)]
+
+
+@lru_cache(maxsize=32)
+def _rows(parts: int, n: int, size: int, interleaved: bool) -> np.ndarray:
+    """:meth:`_Parts.rows` (an optimization loop asks for the same ones every iteration)."""
+    rows = np.empty(n, np.int32)
+    for p, (lo, hi) in enumerate(_bounds(parts, n)):
+        lane = np.arange(hi - lo) % LANES
+        rows[lo:hi] = p * LANES * size + (lane if interleaved else lane * size)
+    rows.flags.writeable = False
+    return rows

@@ -28,7 +28,7 @@ from typing import Any
 import numpy as np
 
 from ...compiler.diagnostics import CompileError
-from .cli import thread_count
+from .cli import scene_file, thread_count
 
 LIBLLVM = Path("/usr/lib/x86_64-linux-gnu/libLLVM.so.19.1")
 REF_FACTOR = 16  # the reference's spp: this times the largest spp measured
@@ -308,9 +308,7 @@ def write_plot(path: Path, curves: list[Curve], errors: dict[str, list[float]],
 def bench_command(args: Any) -> int:
     from ..scene.xml import parse_defines
 
-    scene = Path(args.scene)
-    if not scene.is_file():
-        raise CompileError(f"{scene}: no such scene file")
+    scene = scene_file(args.scene)
     spp = _spp_list(args)
     if args.repeat < 1:
         raise CompileError(f"--repeat: expected a positive integer, got {args.repeat}")

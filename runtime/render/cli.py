@@ -19,14 +19,46 @@ from .image import write_render
 from .progress import summary_line
 
 
-def thread_count(text: str) -> int:
-    """``--threads``: a whole number of threads, 1 or more (argparse prints the message)."""
+def _count(text: str, what: str) -> int:
+    """A whole number, 1 or more, of ``what`` (argparse prints the message)."""
     try:
         n = int(text)
     except ValueError:
         n = 0
     if n < 1:
-        raise argparse.ArgumentTypeError(f"expected a number of threads, 1 or more, got `{text}`")
+        raise argparse.ArgumentTypeError(f"expected a number of {what}, 1 or more, got `{text}`")
+    return n
+
+
+def thread_count(text: str) -> int:
+    """``--threads``: a whole number of threads, 1 or more."""
+    return _count(text, "threads")
+
+
+def scene_file(text: str) -> Path:
+    """The scene argument of ``rdsl render`` and ``rdsl bench``: an existing file."""
+    path = Path(text)
+    if path.is_dir():
+        raise CompileError(f"{path}: is a folder; expected a Mitsuba 3 XML scene file")
+    if not path.is_file():
+        raise CompileError(f"{path}: no such scene file")
+    return path
+
+
+def sample_total(text: str) -> int:
+    """``--spp``: a whole number of samples per pixel, 1 or more."""
+    return _count(text, "samples per pixel")
+
+
+def seed_value(text: str) -> int:
+    """``--seed``: a whole number in 0 .. 2^32 - 1 (Mitsuba's seed is a UInt32)."""
+    try:
+        n = int(text)
+    except ValueError:
+        n = -1
+    if not 0 <= n < 1 << 32:
+        raise argparse.ArgumentTypeError(f"expected a whole number in 0 .. 4294967295, got "
+                                         f"`{text}`")
     return n
 
 
@@ -37,9 +69,9 @@ def add_commands(sub: argparse._SubParsersAction) -> dict[str, Callable[[Any], i
     r.add_argument("-o", "--output", default=None,
                    help="output EXR (default: the scene's name + .exr in the current "
                         "folder); a tonemapped PNG is written beside it")
-    r.add_argument("--spp", type=int, default=None, help="samples per pixel (default: the "
+    r.add_argument("--spp", type=sample_total, default=None, help="samples per pixel (default: the "
                    "scene's sampler)")
-    r.add_argument("--seed", type=int, default=None)
+    r.add_argument("--seed", type=seed_value, default=None)
     r.add_argument("--target", default="host")
     r.add_argument("--variant", default="rgb",
                    help=", ".join(VARIANTS) + " (default: rgb)")
@@ -84,9 +116,7 @@ def render_command(args: Any) -> int:
         args.target = ptx_target(device_arch())
         args.accel = "bvh"  # Embree runs on the CPU: GPU rays go through the BVH in rdsl
     build = Build.of(args.target, args.variant)  # a bad name fails before the scene loads
-    scene_path = Path(args.scene)
-    if not scene_path.is_file():
-        raise CompileError(f"{scene_path}: no such scene file")
+    scene_path = scene_file(args.scene)
     out = Path(args.output) if args.output else Path(scene_path.stem + ".exr")
     if out.suffix.lower() != ".exr":
         out = out.with_suffix(".exr")

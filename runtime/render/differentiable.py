@@ -46,7 +46,7 @@ from ...core.color import ColorModel
 from ...core.scene_spec import Instance, SceneSpec, Slot
 from ..plugins import INTERNAL, stdlib_plugin
 from .bsdfs import plugin_params
-from .integrators import integrator_instances
+from .integrators import integer_settings, integrator_instances
 from .prebuild import speculate
 
 if TYPE_CHECKING:
@@ -141,6 +141,15 @@ def _lookup(slots: dict[str, Slot], name: str) -> tuple[str, Slot]:
     return key, slots[key]
 
 
+def _numbers(name: str, value: Any) -> np.ndarray:
+    """``value`` as float32, or a ValueError naming the parameter (not numpy's)."""
+    try:
+        return np.asarray(value, np.float32)
+    except (TypeError, ValueError):
+        raise ValueError(f"`{name}`: expected a number or an array of numbers, got "
+                         f"{value!r}") from None
+
+
 class SceneParams(MutableMapping):
     """The scene's parameters by name (see the module's documentation)."""
 
@@ -168,7 +177,11 @@ class SceneParams(MutableMapping):
             self._set_texels(name, self.texels[key], value)
             self._assigned(name)
             return
-        v = np.asarray(value, np.float32).reshape(-1)
+        v = _numbers(name, value).reshape(-1)
+        if key in integer_settings(self.scene.desc.integrator) and \
+                not np.all(np.isfinite(v) & (v == np.round(v))):
+            raise ValueError(f"`{name}` is a whole-number setting of the integrator; got "
+                             f"{value!r}")
         if v.size not in (1, slot.size):
             hint = " (a colour in the spectral variants: 3 sigmoid-polynomial coefficients " \
                 "and a scale)" if self.scene.build.model.spectral and slot.size == 4 else ""
@@ -186,7 +199,7 @@ class SceneParams(MutableMapping):
             speculate(self.scene, self.assigned)
 
     def _set_texels(self, name: str, texels: Texels, value: Any) -> None:
-        v = np.asarray(value, np.float32)
+        v = _numbers(name, value)
         if v.shape != texels.shape and v.size not in (1, texels.size):
             raise ValueError(f"`{name}` holds texels of shape {texels.shape}; got an array "
                              f"of shape {v.shape}")

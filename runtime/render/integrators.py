@@ -137,6 +137,17 @@ def _decl(integ: Any) -> Any:
     return decl
 
 
+def integer_settings(integ: Any) -> set[str]:
+    """``scene.params`` names of the integrators' ``Int`` and ``Bool`` params
+    (``path.max_depth``): whole numbers, which have no derivative."""
+    out = set()
+    for node in [integ, *integ.children]:
+        name = node.id or node.type
+        out |= {f"{name}.{k}" for k, p in _decl(node).params().items()
+                if p.type in ("Int", "Bool")}
+    return out
+
+
 def nests(integ: Any) -> bool:
     """Whether the integrator's ``sample`` takes the nested integrator's estimate."""
     params, _ = _decl(integ).signature("sample")

@@ -35,7 +35,7 @@ from ...core.color import ColorModel
 from ...core.scene_spec import SceneSpec
 from ..scene import load_scene_description
 from ..scene.reads import recording
-from ..scene.samplers import sample_count
+from ..scene.samplers import requested_samples, sample_count
 from ..tables import fill_tables
 from .bsdfs import (
     dispersion_warnings,
@@ -444,8 +444,8 @@ class Scene:
         """The image at ``spp`` samples per pixel.  ``cancel`` is asked after each batch
         of samples (none is running then): once it answers True the render stops with
         :class:`RenderCancelled` (rdsl render --watch drops a render an edit made stale)."""
-        spp = sample_count(self.desc.sensor.sampler, int(spp or self.spp))
-        seed = self.seed if seed is None else int(seed)
+        spp, seed = requested_samples(spp, seed, self.spp, self.seed)
+        spp = sample_count(self.desc.sensor.sampler, spp)
         mod = self._tiered(self.compile(quick=self.quick_fits(spp)))
         if mod.traces_rays:  # a path tracer with max_depth 0 traces none: its image is black
             if self.embree is None:

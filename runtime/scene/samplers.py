@@ -12,6 +12,8 @@ import warnings
 from collections.abc import Callable
 from typing import Any
 
+import numpy as np
+
 from ...compiler.ir import Loc
 from .errors import scene_error
 
@@ -34,6 +36,25 @@ def valid_count(ptype: str, n: int) -> int:
             r *= 2
         return r * r
     return n
+
+
+def requested_samples(spp: Any, seed: Any, default_spp: int, default_seed: int
+                      ) -> tuple[int, int]:
+    """A call's ``spp`` and ``seed`` (None: the scene's), checked: ``spp`` a whole number,
+    1 or more, ``seed`` a whole number in 0 .. 2^32 - 1 (Mitsuba's ``seed`` is a UInt32).
+    A bad value is a ``ValueError`` naming it, not a black image (a negative count) or
+    a seed silently wrapped."""
+    def whole(x: Any) -> bool:
+        return isinstance(x, (int, np.integer)) and not isinstance(x, (bool, np.bool_))
+
+    spp = default_spp if spp is None else spp
+    if not whole(spp) or spp < 1:
+        raise ValueError(f"spp: expected a whole number of samples per pixel, 1 or more, "
+                         f"got {spp!r}")
+    seed = default_seed if seed is None else seed
+    if not whole(seed) or not 0 <= seed < 1 << 32:
+        raise ValueError(f"seed: expected a whole number in 0 .. 2^32 - 1, got {seed!r}")
+    return int(spp), int(seed)
 
 
 def sample_count(sampler: Any, n: int, loc: Loc | None = None) -> int:

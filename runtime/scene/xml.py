@@ -556,6 +556,9 @@ def _negative(text: str) -> bool:
 def read_scene(path: str | Path, defines: dict[str, Any] | None = None) -> SceneTree:
     """Parse a Mitsuba 3 scene file into a :class:`SceneTree`."""
     path = Path(path)
+    if path.is_dir():
+        raise scene_error(f"'{path}' is a folder; expected a Mitsuba 3 XML scene file",
+                          file_loc(str(path)))
     if not path.is_file():
         raise scene_error(f"scene file '{path}' not found", file_loc(str(path)))
     r = _Reader(path, defines or {})
