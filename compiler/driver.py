@@ -71,7 +71,17 @@ def run_passes(module: Module, passes: list[Pass], verify: bool | str = True,
     """Run ``passes`` in order, printing where asked.  ``verify``: True (or "each")
     verifies the IR after lowering and after every pass; "ends" after lowering and after
     the last pass only (what renders use: every pass's output is checked by the tests,
-    and a fifth of a cold compile went to re-verifying); False never."""
+    and a fifth of a cold compile went to re-verifying); False never.  Python's cycle
+    collector is paused meanwhile (:func:`~rdsl.core.gcpause.gc_paused`: the passes allocate
+    hundreds of thousands of objects and leave no cycles), for every caller: a table's
+    kernel (compiler/precompute.py), ``rdsl ir`` and the tests call this directly, and
+    with the collector running a rough plastic's adjoint took 1.8x as long."""
+    with gc_paused():
+        return _run_passes(module, passes, verify, print_after, out, stop_after)
+
+
+def _run_passes(module: Module, passes: list[Pass], verify: bool | str,
+                print_after: str | None, out: TextIO, stop_after: str | None) -> Module:
     from .printer import print_module
     from .verify import verify as verify_module
 

@@ -261,7 +261,15 @@ def _reachable(module: Module, fn: Function) -> list[str]:
 
 def _compile(sub: Module, fn: Function, has_x: bool) -> _Kernel:
     """Wrap ``fn`` as the kernel ``tabulate(x, params...)``, compile it for the host
-    and load it (compiler/backends/native_lib.py)."""
+    and load it (compiler/backends/native_lib.py); the cycle collector paused, as for
+    every compile (core/gcpause.py: a table is built at scene load, outside one)."""
+    from ..core.gcpause import gc_paused
+
+    with gc_paused():
+        return _compile_paused(sub, fn, has_x)
+
+
+def _compile_paused(sub: Module, fn: Function, has_x: bool) -> _Kernel:
     from .backends.base import c_args, c_name
     from .backends.llvm import optimized_module
     from .backends.native_lib import address_of, load_native

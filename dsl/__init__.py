@@ -16,6 +16,7 @@ from pathlib import Path
 from ..compiler import ir
 from ..compiler.diagnostics import CompileError
 from ..compiler.sources import read_source
+from ..core.gcpause import gc_paused
 from . import ast
 from .checker import CheckedProgram, check_program
 from .parser import parse
@@ -40,7 +41,14 @@ def check(path_or_source: str | Path, filename: str | None = None,
 
 def compile_to_ir(path_or_source: str | Path, filename: str | None = None,
                   search_paths: Iterable[str | Path] | None = None) -> ir.Module:
-    """Parse, check and lower a program to an IR module (see docs/language.md)."""
+    """Parse, check and lower a program to an IR module (see docs/language.md); Python's
+    cycle collector paused meanwhile, as in ``run_passes`` (compiler/driver.py)."""
+    with gc_paused():
+        return _compile_to_ir(path_or_source, filename, search_paths)
+
+
+def _compile_to_ir(path_or_source: str | Path, filename: str | None,
+                   search_paths: Iterable[str | Path] | None) -> ir.Module:
     from .lower import lower_program
 
     checked = check(path_or_source, filename, search_paths)
