@@ -8,8 +8,12 @@ interpolation (:func:`build_read`).  A ``table fn c() -> Float`` is one value pe
 lays them out at the end of ``PRM`` and the runtime fills them at scene load, both with
 :func:`tabulate`.
 
+A ``table(sum = N) fn t(k: Int)`` is one value: the sum, in float64, of its N terms
+``t(0) .. t(N-1)``, which are sampled as a table's points are.
+
 The samples are computed natively: the table function becomes a kernel (the pipeline and
-the LLVM backend for the scalar target at O1, about a second; kept per function in the
+the LLVM backend for the host's vectors at O1, half a second; the points are its lanes;
+kept per function in the
 process and in the kernel cache on disk, so that another scene or process with the same
 plugin builds nothing), mapped over the sample points with the instance's parameters as
 uniform arguments.  Its code depends on the plugin, never on the values, so every instance
@@ -51,11 +55,15 @@ _CTYPES = {"f32": ctypes.c_float, "i32": ctypes.c_int32, "u32": ctypes.c_uint32,
            "u64": ctypes.c_uint64, "bool": ctypes.c_uint8}
 _NP = {"f32": np.float32, "i32": np.int32, "u32": np.uint32, "u64": np.uint64, "bool": np.bool_}
 _kernels: dict[str, Any] = {}  # printed IR of the table function -> its compiled kernel
+TABLE_TARGET = "host"  # what a table's kernel is compiled for (its points are its lanes)
 _lock = threading.Lock()
 
 
 def sample_points(options: dict[str, Any]) -> np.ndarray:
-    """Where a table is sampled: ``linspace(lo, hi, n)`` (one point, 0, for a value)."""
+    """Where a table is sampled: ``linspace(lo, hi, n)``; the term indices 0 .. N-1 of a
+    ``sum`` table (int32); one point, 0, for a value."""
+    if "sum" in options:
+        return np.arange(options["sum"], dtype=np.int32)
     if "n" not in options:
         return np.zeros(1, np.float32)
     return np.linspace(options["lo"], options["hi"], options["n"]).astype(np.float32)
@@ -80,15 +88,17 @@ def tabulate(module: Module, options: dict[str, Any], params: dict[str, Any]) ->
     """The samples (float32) of the table function ``options["fn"]`` of ``module`` with its
     plugin parameters set to ``params`` (by name; missing ones take their defaults)."""
     fn = module.functions[options["fn"]]
-    has_x = bool(options.get("n"))
+    has_x = bool(options.get("n")) or "sum" in options
     names, text = _source(module, fn, has_x)
     xs = sample_points(options)
     path = _disk_entry(text, xs, params)
-    if path is not None and (got := _load(path, len(xs))) is not None:
-        return got
-    out = _kernel(module, names, text, fn, has_x)(xs, params)
-    if path is not None:
-        _store(path, out)
+    out = _load(path, len(xs)) if path is not None else None
+    if out is None:
+        out = _kernel(module, names, text, fn, has_x)(xs, params)
+        if path is not None:
+            _store(path, out)
+    if "sum" in options:  # the terms summed in float64, in order
+        return np.array([np.sum(out, dtype=np.float64)], np.float32)
     return out
 
 
@@ -156,7 +166,8 @@ class _Kernel:
         self.fn = ctypes.CFUNCTYPE(None, *argtypes)(address)
 
     def __call__(self, xs: np.ndarray, values: dict[str, Any]) -> np.ndarray:
-        xs = np.ascontiguousarray(xs, np.float32)
+        x_type = next((_NP[a.dtype] for a in self.args if a.kind == "varying"), np.float32)
+        xs = np.ascontiguousarray(xs, x_type)
         out = np.zeros(len(xs), np.float32)
         defaults = self.defaults
         call: list[Any] = [len(xs)]
@@ -215,7 +226,7 @@ def _kernel(module: Module, names: list[str], key: str, fn: Function, has_x: boo
 def _kernel_entry(key: str) -> Any:
     from .build import Build
 
-    t = Build.of("scalar", "rgb").target
+    t = Build.of(TABLE_TARGET, "rgb").target
     return _cache_file("kernel-", ".pickle", t.triple, t.cpu, t.features, key)
 
 
@@ -288,8 +299,9 @@ def _compile_paused(sub: Module, fn: Function, has_x: bool) -> _Kernel:
                                f"of type {p.value.type}; a table may depend only on `Float`, "
                                "`Int` and `Bool` parameters", fn.loc)
     wrapper.params = [p for p in wrapper.params if isinstance(p.value.type, ScalarType)]
-    # run once per scene: the scalar target and LLVM's O1 compile fastest
-    build = Build.of("scalar", "rgb")
+    # run once per scene: LLVM's O1 compiles fastest; the host's vectors, since a table's
+    # points (a sum table's terms) are independent lanes
+    build = Build.of(TABLE_TARGET, "rgb")
     run_passes(sub, pipeline(build), verify=False)
     mod, tm = optimized_module(sub, build.target, speed=1)
     t = build.target
@@ -306,7 +318,7 @@ def _compile_paused(sub: Module, fn: Function, has_x: bool) -> _Kernel:
 def _wrapper(sub: Module, fn: Function, has_x: bool) -> Function:
     """``tabulate(x, p...) -> fn([x,] p...)``, exported; ``p`` are ``fn``'s plugin
     parameters (uniform), ``x`` the sample point (varying)."""
-    x = Param(Value(F32, "x"))
+    x = Param(Value(fn.params[0].value.type if has_x else F32, "x"))
     rest = fn.params[1:] if has_x else fn.params
     params = [Param(Value(p.value.type, p.value.name), True, p.default) for p in rest]
     wrapper = Function("tabulate", [x, *params], [F32], _body(fn, x, params, has_x), fn.loc,

@@ -168,6 +168,7 @@ class _Checker(Declarations):
             if fd.table is not None:
                 pl.tables[fd.name] = _table_options(
                     fn, pd, {m for m, _, _ in PLUGIN_INTERFACES[pd.kind]})
+                fn.summed = "sum" in pl.tables[fd.name]
         for mname, params, ret in PLUGIN_INTERFACES[pd.kind]:
             sig = f"fn {mname}(" + ", ".join(f"{n}: {t}" for n, t in params) + f") -> {ret}"
             fn = pl.fns.get(mname)
@@ -546,20 +547,23 @@ class _Checker(Declarations):
                    types: list[Type | None]) -> Type | None:
         viable: list[tuple[int, FnInfo]] = []
         for fn in cands:
-            if len(fn.params) != len(args):
+            if len(fn.call_types) != len(args):
                 continue
-            costs = [conv_cost(a, t, p) for a, t, p in zip(args, types, fn.param_types)]
+            costs = [conv_cost(a, t, p) for a, t, p in zip(args, types, fn.call_types)]
             if all(c is not None for c in costs):
                 viable.append((sum(costs), fn))  # type: ignore[arg-type]
         loc = e.func.loc if isinstance(e.func, A.Name) else (e.func.name_loc or e.loc)
         if not viable:
             if len(cands) == 1:
                 fn = cands[0]
-                if len(fn.params) != len(args):
-                    raise err(f"`{name}` takes {len(fn.params)} argument"
-                              f"{'s' if len(fn.params) != 1 else ''}, found {len(args)} "
-                              f"(expected `{fn.signature()}`)", loc)
-                for i, (a, t, p) in enumerate(zip(args, types, fn.param_types)):
+                want = len(fn.call_types)
+                if want != len(args):
+                    raise err(f"`{name}` takes {want} argument"
+                              f"{'s' if want != 1 else ''}, found {len(args)} "
+                              f"(expected `{fn.signature()}`"
+                              + ("; a `sum` table is one value" if fn.summed else "") + ")",
+                              loc)
+                for i, (a, t, p) in enumerate(zip(args, types, fn.call_types)):
                     if conv_cost(a, t, p) is None:
                         raise err(f"argument {i + 1} of `{name}`: expected {quoted(p)}, found "
                                   f"{quoted(t)}", a.loc)
@@ -573,9 +577,16 @@ class _Checker(Declarations):
             cl = "; ".join(f"`{c.signature()}`" for c in winners)
             raise err(f"ambiguous call `{found}`; candidates are: {cl}", loc)
         fn = winners[0]
-        e.args = [apply_conv(a, t, p) for a, t, p in zip(args, types, fn.param_types)]
+        e.args = [apply_conv(a, t, p) for a, t, p in zip(args, types, fn.call_types)]
         e.target = fn
         assert self.ctx is not None
+        if fn.summed and fn.plugin is not None:
+            if self.ctx.fn.plugin is not fn.plugin:
+                raise err(f"`{fn.plugin.name}.{fn.name}` is a `sum` table, read only inside "
+                          "its plugin", loc)
+            if self.ctx.fn.decl.table is not None:
+                raise err(f"`{fn.name}` is a `sum` table: another table cannot read it "
+                          "(tables are filled independently of each other)", loc)
         self.calls.setdefault(self.ctx.fn, []).append((fn, e.loc))
         return fn.ret
 

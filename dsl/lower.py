@@ -78,15 +78,39 @@ def _table_read(fn: Function, options: dict[str, Any]) -> Function:
     """``NAME.read``, what calls to the table function ``NAME`` call: the same parameters
     (and the hidden table offsets), its body the exact function until ``specialize``
     replaces it by the lookup of the scene's table (see compiler/passes/specialize.py)."""
-    params = [Param(Value(p.value.type, p.value.name), p.uniform, p.default) for p in fn.params]
+    summed = "sum" in options
+    params = [Param(Value(p.value.type, p.value.name), p.uniform, p.default)
+              for p in fn.params[1 if summed else 0:]]
     body = ir.Block()
     b = Builder(body, fn.loc)
-    call = b.emit(Op.CALL, [p.value for p in params], list(fn.ret_types), {"callee": fn.name})
-    b.return_(*call.results)
+    if summed:
+        b.return_(_sum_loop(b, fn, [p.value for p in params], options["sum"]))
+    else:
+        call = b.emit(Op.CALL, [p.value for p in params], list(fn.ret_types),
+                      {"callee": fn.name})
+        b.return_(*call.results)
     method = fn.attrs["method"]
     attrs = {**{k: v for k, v in fn.attrs.items() if k != "export"},
              "table": {"fn": fn.name, "slot": TABLE_SLOT.format(method), **options}}
     return Function(fn.name + ".read", params, list(fn.ret_types), body, fn.loc, attrs)
+
+
+def _sum_loop(b: Builder, fn: Function, args: list[Value], terms: int) -> Value:
+    """The exact value of a `sum` table (before ``specialize`` reads the scene's): the sum
+    of ``fn(k, args...)`` over k < ``terms``, in order."""
+    k, acc = Value(I32, "k"), Value(F32, "acc")
+    blk = ir.Block([k, acc])
+    lb = Builder(blk, fn.loc)
+    more = lb.op(Op.LT, BOOL, k, lb.const(terms, I32))
+    then, other = ir.Block(), ir.Block()
+    tb = Builder(then, fn.loc)
+    term = tb.emit(Op.CALL, [k, *args], [F32], {"callee": fn.name}).results[0]
+    tb.yield_(tb.op(Op.ADD, I32, k, tb.const(1, I32)), tb.op(Op.ADD, F32, acc, term))
+    Builder(other, fn.loc).yield_(k, acc)
+    step = lb.emit(Op.IF, [more], [I32, F32], regions=[then, other]).results
+    lb.yield_(more, *step)
+    loop = b.emit(Op.LOOP, [b.const(0, I32), b.const(0.0, F32)], [I32, F32], regions=[blk])
+    return loop.results[1]
 
 
 # --------------------------------------------------------------------------------------

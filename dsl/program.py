@@ -44,13 +44,19 @@ class FnInfo:
     module: ModuleInfo
     plugin: PluginInfo | None = None
     ir_name: str = ""
+    summed: bool = False  # a `table(sum = N)`: called with no argument (its term's index)
 
     @property
     def param_types(self) -> list[Type]:
         return [p.type for p in self.params]
 
+    @property
+    def call_types(self) -> list[Type]:
+        """What a call passes: the parameters, but a `sum` table's term index."""
+        return self.param_types[1:] if self.summed else self.param_types
+
     def signature(self) -> str:
-        args = ", ".join(type_name(t) for t in self.param_types)
+        args = ", ".join(type_name(t) for t in self.call_types)
         ret = f" -> {type_name(self.ret)}" if self.ret is not None else ""
         return f"{self.name}({args}){ret}"
 

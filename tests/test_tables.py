@@ -6,6 +6,7 @@ of the specialized build, which folds them at compile time."""
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 
 import numpy as np
@@ -49,6 +50,18 @@ bsdf tab {{
      "a table is a `Float` function of no argument or of one `Float` argument"),
     ("table(n = 8, lo = 0.0, hi = 1.0, error = 1e-3) fn t() -> Float { return k; }",
      "a table of no argument is one value and takes no options"),
+    ("table(sum = 8) fn t(x: Float) -> Float { return x; }",
+     "a `sum` table is a `Float` function of one `Int` (the term's index)"),
+    ("table(sum = 8, error = 1e-3) fn t(i: Int) -> Float { return Float(i); }",
+     "a `sum` table takes no other option (found `error`)"),
+    ("table(sum = 0) fn t(i: Int) -> Float { return Float(i); }",
+     "`sum` (the number of terms) must be an integer in 1..65536"),
+    ("table(sum = 4) fn t(i: Int) -> Float { return Float(i); }\n"
+     "fn u() -> Float { return t(2); }",
+     "`t` takes 0 arguments, found 1 (expected `t() -> Float`; a `sum` table is one value)"),
+    ("table(sum = 4) fn t(i: Int) -> Float { return Float(i); }\n"
+     "table fn u() -> Float { return t(); }",
+     "`t` is a `sum` table: another table cannot read it"),
 ])
 def test_bad_tables_are_diagnostics(decl, message):
     with pytest.raises(CompileError) as e:
@@ -238,11 +251,80 @@ def test_a_table_cannot_depend_on_a_texture():
     assert tabulate(module, read.attrs["table"], params).shape == (64,)
 
 
+# ---------------------------------------------------------------------- sum tables
+
+SUMMED = """
+bsdf summed {
+    param k: Float = 0.5;
+    param terms: Int = 1000;
+    /// sum over i < 1000 of k^i / i!  (e^k, its terms past `terms` zero)
+    table(sum = 1000) fn series(i: Int) -> Float {
+        var t = 1.0;
+        for j in 1..i + 1 { t = t * k / Float(j); }
+        return select(i < terms, t, 0.0);
+    }
+    fn eval(si: Surface, wo: Vec3) -> Spectrum { return Spectrum(series()); }
+    fn pdf(si: Surface, wo: Vec3) -> Float { return 0.0; }
+    fn sample(si: Surface, u1: Float, u2: Vec2) -> BsdfSample {
+        return BsdfSample { wo: si.wi, pdf: 0.0, eta: 1.0, weight: Spectrum(0.0),
+                            delta: false };
+    }
+}
+"""
+
+
+def test_a_sum_table_is_read_only_inside_its_plugin():
+    with pytest.raises(CompileError, match=r"`summed.series` is a `sum` table, read only "
+                                           r"inside its plugin") as e:
+        frontend(SUMMED + "fn outside() -> Float { return summed.series(); }\n")
+    assert e.value.diagnostics[0].loc.line == SUMMED.count("\n") + 1
+
+
+@pytest.mark.parametrize("k, terms", [(0.5, 1000), (-1.25, 1000), (2.0, 3)])
+def test_a_sum_table_is_the_sum_of_its_terms(k, terms):
+    """``table(sum = N)``: one value per instance, the N terms computed as the points of a
+    table (side by side, in lanes) and summed in float64; against the float64 series."""
+    module = frontend(SUMMED)
+    read = module.functions["summed.series.read"]
+    assert [p.value.name for p in read.params][:2] == ["k", "terms"]  # no term index
+    params = table_params(read, Instance("summed", {"k": k, "terms": terms}))
+    got = tabulate(module, read.attrs["table"], params)
+    term, want = 1.0, 0.0
+    for i in range(terms):
+        want, term = want + term, term * k / (i + 1)
+    assert got.shape == (1,) and got.dtype == np.float32
+    assert got[0] == pytest.approx(want, rel=3e-6)
+
+
+def test_a_sum_table_reads_its_value_in_both_builds_and_computes_it_without_a_scene():
+    """Without a scene the read computes the sum itself (in order, in float32); the
+    specialized build folds the precomputed value, the generic one reads it from PRM."""
+    from rdsl.core.scene_spec import SceneSpec
+
+    si = _surfaces(_directions(np.random.default_rng(1), 4))
+    wo = si["wi"]
+    plain = rdsl.jit(SUMMED, target="host")["summed.eval"]
+    exact = np.asarray(plain(si, wo, k=0.75))[:, 0]
+    np.testing.assert_allclose(exact, math.exp(0.75), rtol=1e-6)
+    scene_src = SUMMED + """
+import render.scene;
+fn ev(id: Int, si: Surface, wo: Vec3, T: [Float]) -> Spectrum {
+    return scene_bsdf_eval(id, si, wo, T);
+}
+"""
+    spec = SceneSpec(bsdfs=[Instance("summed", {"k": 0.75}), Instance("summed", {"k": 2.0})])
+    mod = rdsl.jit(scene_src, target="host", scene=spec)
+    for i, k in enumerate((0.75, 2.0)):
+        got = np.asarray(mod.ev(np.full(4, i, np.int32), si, wo, np.zeros(3, f32)))[:, 0]
+        np.testing.assert_allclose(got, math.exp(k), rtol=3e-6)
+
+
 # ---------------------------------------------------------------------- the kernel on disk
 
 _OTHER_PROCESS = """
 import sys
 import numpy as np
+import math
 from pathlib import Path
 import rdsl.compiler.precompute as pc
 from rdsl.compiler.driver import frontend
