@@ -12,11 +12,10 @@ A ``table(sum = N) fn t(k: Int)`` is one value: the sum, in float64, of its N te
 ``t(0) .. t(N-1)``, which are sampled as a table's points are.
 
 The samples are computed natively: the table function becomes a kernel (the pipeline and
-the LLVM backend for the host's vectors at O1, half a second; the points are its lanes;
-kept per function in the
-process and in the kernel cache on disk, so that another scene or process with the same
-plugin builds nothing), mapped over the sample points with the instance's parameters as
-uniform arguments.  Its code depends on the plugin, never on the values, so every instance
+the LLVM backend for the host's vectors at O1, half a second, the points in its lanes;
+kept per function in the process and in the kernel cache on disk, so that another scene
+or process with the same plugin builds nothing), mapped over the sample points with the
+instance's parameters as uniform arguments.  Its code depends on the plugin, never on the values, so every instance
 and scene reuses it.  Tables are the place for the
 expensive integrals (Mitsuba's are 64 x 32 x 32 and 64 x 128 x 128 evaluations of a
 microfacet integrand), far beyond what the reference interpreter runs in a second; small
@@ -97,7 +96,7 @@ def tabulate(module: Module, options: dict[str, Any], params: dict[str, Any]) ->
         out = _kernel(module, names, text, fn, has_x)(xs, params)
         if path is not None:
             _store(path, out)
-    if "sum" in options:  # the terms summed in float64, in order
+    if "sum" in options:  # the terms summed in float64 (numpy's pairwise sum)
         return np.array([np.sum(out, dtype=np.float64)], np.float32)
     return out
 
