@@ -365,3 +365,17 @@ class Program:
     structs: list[StructDecl] = field(default_factory=list)
     fns: list[FnDecl] = field(default_factory=list)
     plugins: list[PluginDecl] = field(default_factory=list)
+
+
+def always_returns(stmts: list[Stmt]) -> bool:
+    """Whether every path through `stmts` ends in a `return` (a function's missing return)."""
+    for s in stmts:
+        if isinstance(s, Return):
+            return True
+        if isinstance(s, Block) and always_returns(s.stmts):
+            return True
+        if isinstance(s, (If, IfConst)) and s.else_ is not None:
+            other = s.else_.stmts if isinstance(s.else_, Block) else [s.else_]
+            if always_returns(s.then.stmts) and always_returns(other):
+                return True
+    return False

@@ -42,7 +42,7 @@ from .declarations import Declarations
 from .imports import STDLIB, load_program
 from .interfaces import OPTIONAL_INTERFACES, PLUGIN_INTERFACES, check_integrator
 from .parser import parse
-from .tables import table_options as _table_options
+from .tables import check_sum_table_read, table_options as _table_options
 from .program import CheckedProgram, FnInfo, ModuleInfo, PluginInfo, Symbol
 from .types import (
     BUILTIN_TYPES,
@@ -231,7 +231,7 @@ class _Checker(Declarations):
         self.ctx = _FnCtx(fn)
         self.calls.setdefault(fn, [])
         self._block(fn.decl.body.stmts, _Scope(scope))
-        if fn.ret is not None and not _always_returns(fn.decl.body.stmts):
+        if fn.ret is not None and not A.always_returns(fn.decl.body.stmts):
             raise err(f"missing return: function `{fn.name}` must return a {quoted(fn.ret)} on "
                       "every path", fn.decl.loc)
         check_literals(fn.decl.body)
@@ -580,30 +580,6 @@ class _Checker(Declarations):
         e.args = [apply_conv(a, t, p) for a, t, p in zip(args, types, fn.call_types)]
         e.target = fn
         assert self.ctx is not None
-        if fn.summed and fn.plugin is not None:
-            if self.ctx.fn.plugin is not fn.plugin:
-                raise err(f"`{fn.plugin.name}.{fn.name}` is a `sum` table, read only inside "
-                          "its plugin", loc)
-            if self.ctx.fn.decl.table is not None:
-                raise err(f"`{fn.name}` is a `sum` table: another table cannot read it "
-                          "(tables are filled independently of each other)", loc)
+        check_sum_table_read(fn, self.ctx.fn, loc)
         self.calls.setdefault(self.ctx.fn, []).append((fn, e.loc))
         return fn.ret
-
-
-# --------------------------------------------------------------------------------------
-# Helpers
-
-
-def _always_returns(stmts: list[A.Stmt]) -> bool:
-    for s in stmts:
-        if isinstance(s, A.Return):
-            return True
-        if isinstance(s, A.Block) and _always_returns(s.stmts):
-            return True
-        if isinstance(s, (A.If, A.IfConst)) and s.else_ is not None:
-            other = s.else_.stmts if isinstance(s.else_, A.Block) else [s.else_]
-            if _always_returns(s.then.stmts) and _always_returns(other):
-                return True
-    return False
-

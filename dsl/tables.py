@@ -70,3 +70,16 @@ def _sum_options(fn: FnInfo, spec: A.TableSpec, where: str) -> dict[str, Any]:
         raise err(f"{where}: `sum` (the number of terms) must be an integer in "
                   f"1..{MAX_POINTS}", loc)
     return {"sum": n}
+
+
+def check_sum_table_read(fn: FnInfo, caller: FnInfo, loc: Any) -> None:
+    """A `sum` table is one value per instance, filled before any other table: only its own
+    plugin's non-table functions read it."""
+    if not fn.summed or fn.plugin is None:
+        return
+    if caller.plugin is not fn.plugin:
+        raise err(f"`{fn.plugin.name}.{fn.name}` is a `sum` table, read only inside "
+                  "its plugin", loc)
+    if caller.decl.table is not None:
+        raise err(f"`{fn.name}` is a `sum` table: another table cannot read it "
+                  "(tables are filled independently of each other)", loc)
