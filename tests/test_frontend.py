@@ -6,7 +6,6 @@ interpreter can run it, by executing the lowered functions.
 
 from __future__ import annotations
 
-import time
 from pathlib import Path
 
 import numpy as np
@@ -509,7 +508,7 @@ def test_stdlib_math_is_imported() -> None:
     assert all(c in m.functions for c in callees) and len(callees) == 2
 
 
-def test_parse_speed() -> None:
+def test_a_long_file_parses_with_the_linear_parser() -> None:
     body = "\n".join(
         f"fn f{i}(a: Float, b: Vec3) -> Float {{\n"
         f"    var x = a * {i}.5 + b.x;\n"
@@ -517,7 +516,10 @@ def test_parse_speed() -> None:
         f"    return x;\n}}"
         for i in range(100))
     assert len(body.splitlines()) >= 500
-    t = time.perf_counter()
-    parse(body, "big.rdsl")
-    assert time.perf_counter() - t < 1.0
-    lower(body)
+    # speed is measured in bench/compile_phases.py, not here; what keeps a parse linear in
+    # the file's length is lark's LALR parser (no backtracking, no Earley chart)
+    from rdsl.dsl.parser import _lark
+    assert _lark().options.parser == "lalr"
+    program = parse(body, "big.rdsl")
+    assert [f.name for f in program.fns] == [f"f{i}" for i in range(100)]
+    assert len(lower(body).functions) >= 100
