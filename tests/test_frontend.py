@@ -13,6 +13,7 @@ import pytest
 from rdsl.compiler import ir
 from rdsl.compiler.ir import BOOL, F32, I32, SPECTRUM, U32, Op
 from rdsl.dsl import ast, check, compile_to_ir, parse
+from rdsl.dsl.parser import _lark
 
 
 def scoped_ok(fn: ir.Function) -> None:
@@ -518,7 +519,6 @@ def test_a_long_file_parses_with_the_linear_parser() -> None:
     assert len(body.splitlines()) >= 500
     # speed is measured in bench/compile_phases.py, not here; what keeps a parse linear in
     # the file's length is lark's LALR parser (no backtracking, no Earley chart)
-    from rdsl.dsl.parser import _lark
     assert _lark().options.parser == "lalr"
     program = parse(body, "big.rdsl")
     assert [f.name for f in program.fns] == [f"f{i}" for i in range(100)]
