@@ -16,6 +16,7 @@ import numpy as np
 from .. import ir
 from ..builtins import F32_INTRINSICS
 from ..diagnostics import CompileError
+from .llvm_runs import consecutive_run
 
 F32 = L.FloatType()
 I1 = L.IntType(1)
@@ -93,6 +94,7 @@ class Lowering:
         self.b = L.IRBuilder(fn.append_basic_block("entry"))
         self.vals: dict[ir.Value, L.Value] = {}
         self._from_memory: dict[ir.Value, bool] = {}
+        self.runs: dict[tuple[ir.Value, int], tuple] = {}  # llvm_runs.consecutive_run's checks
 
     # -- helpers ------------------------------------------------------------------------
     def v(self, value: ir.Value) -> L.Value:
@@ -134,7 +136,16 @@ class Lowering:
         return self.b.call(self.m.intrinsic(name, ret, types), list(args))
 
     def block(self, blk: ir.Block) -> list[L.Value] | None:
-        """Lower the instructions of ``blk``; return the operands of its terminator."""
+        """Lower the instructions of ``blk``; return the operands of its terminator.  What
+        the block computes is not reused after it (``runs``: it may not dominate)."""
+        outer = self.runs
+        self.runs = dict(outer)
+        try:
+            return self._block(blk)
+        finally:
+            self.runs = outer
+
+    def _block(self, blk: ir.Block) -> list[L.Value] | None:
         for ins in blk.instrs:
             if ins.op is ir.Op.YIELD:
                 return [self.v(o) for o in ins.operands]
@@ -428,11 +439,10 @@ def _lower_gather(lw: Lowering, ins: ir.Instr) -> L.Value:
         r = lw.call(f"llvm.masked.gather.{mangle(vty)}.{mangle(p.type)}", vty,
                     p, const(I32, ALIGN[e.name]), m, const(vty, 0))
         return _from_mem(lw, r, e)
-    return _from_mem(lw, _gather_or_load(lw, lw.v(buf), lw.v(idx), p, m, vty,
-                                         ALIGN[e.name]), e)
+    return _from_mem(lw, _gather_or_load(lw, lw.v(buf), idx, p, m, vty, ALIGN[e.name]), e)
 
 
-def _gather_or_load(lw: Lowering, base: L.Value, idx: L.Value, ptrs: L.Value, m: L.Value,
+def _gather_or_load(lw: Lowering, base: L.Value, idx: ir.Value, ptrs: L.Value, m: L.Value,
                     vty: L.Type, align: int) -> L.Value:
     """A masked gather, or a masked vector load when the lanes' i32 indices turn out to be
     consecutive (``idx[k] == idx[0] + k``, checked at run time): the same values, from one
@@ -440,7 +450,7 @@ def _gather_or_load(lw: Lowering, base: L.Value, idx: L.Value, ptrs: L.Value, m:
     batch of samples) take the load; other indices pay a compare and a branch, so indices
     read from memory (a triangle's vertices) skip the check."""
     b = lw.b
-    first, contiguous = _consecutive(lw, idx, vty.count, m)
+    first, contiguous = consecutive_run(lw, idx, m)
     load_bb = b.append_basic_block("contiguous")
     gather_bb = b.append_basic_block("gather")
     join_bb = b.append_basic_block("gathered")
@@ -461,26 +471,6 @@ def _gather_or_load(lw: Lowering, base: L.Value, idx: L.Value, ptrs: L.Value, m:
     return r
 
 
-def _consecutive(lw: Lowering, idx: L.Value, W: int, mask: L.Value
-                 ) -> tuple[L.Value, L.Value]:
-    """The index lane 0 would have, ``first``, and whether every active lane k of ``mask``
-    has ``idx[k] == first + k`` (i32 indices): then a masked vector access at ``first``
-    touches exactly the active lanes' elements.  Inactive lanes are not compared, so a
-    packet whose finished lanes kept stale indices (a loop's lanes leave it at different
-    iterations: the adjoint's tape slots) still takes the vector access; ``first`` comes
-    from the first active lane (any value when none is: nothing is accessed then)."""
-    b = lw.b
-    iota = L.Constant(L.VectorType(I32, W), [L.Constant(I32, k) for k in range(W)])
-    bits_ty = L.IntType(W)  # W <= 16: a lane mask's bits fit an i32
-    active = b.zext(b.bitcast(mask, bits_ty), I32)
-    lead = lw.call("llvm.cttz.i32", I32, active, L.Constant(L.IntType(1), 0))
-    lane = b.and_(lead, const(I32, W - 1))  # 32 (no lane active) -> lane 0
-    first = b.sub(b.extract_element(idx, lane), lane)
-    same = b.icmp_signed("==", idx, b.add(lw.m.splat(b, first, W), iota))
-    bits = b.bitcast(b.or_(same, b.not_(mask)), bits_ty)
-    return first, b.icmp_signed("==", bits, L.Constant(bits_ty, -1))
-
-
 def _lower_scatter(lw: Lowering, ins: ir.Instr) -> None:
     buf, idx, val, mask = ins.operands
     e = _buf_elem(buf)
@@ -499,7 +489,7 @@ def _lower_scatter(lw: Lowering, ins: ir.Instr) -> None:
     # as _gather_or_load: a masked vector store where the indices turn out consecutive (the
     # adjoint's per-lane tape rows, interleaved: passes/ad_checkpoint.py)
     b = lw.b
-    first, contiguous = _consecutive(lw, lw.v(idx), m.type.count, m)
+    first, contiguous = consecutive_run(lw, idx, m)
     with b.if_else(contiguous) as (store, other):
         with store:
             p0 = b.gep(lw.v(buf), [b.sext(first, I64)], source_etype=mty)
