@@ -28,6 +28,7 @@ from .passes.lift import Lift
 from .passes.optimize import Optimize
 from .passes.scalarize import Scalarize
 from .passes.specialize import Specialize
+from .passes.tape_stores import TapeStores
 from .passes.vectorize import Vectorize
 from .sources import PRELUDE, STDLIB, is_path, source_files  # noqa: F401 (re-exported)
 
@@ -60,6 +61,8 @@ def pipeline(build: Build, scene: SceneSpec | None = None,
         # the adjoint sweeps' zero adjoints and repeated partials, pruned before vectorize
         # copies each of them for the lanes (it was half of what vectorize emitted)
         *([Optimize()] if build.ad == "reverse" else []),
+        # the tape values no sweep reads are not stored (their loads were pruned above)
+        *([TapeStores()] if build.ad == "reverse" else []),
         Vectorize(build.width),  # SPMD over lanes with masks
         Optimize(),  # CSE broadcasts and masks
     ]

@@ -35,7 +35,8 @@ def pass_names() -> list[str]:
 def _load_all() -> None:
     # import every pass module so that its @register runs
     from . import ad_reverse, eliminate  # noqa: F401
-    from . import evaluate, inline, lift, optimize, scalarize, specialize, vectorize  # noqa: F401
+    from . import evaluate, inline, lift, optimize, scalarize, specialize, tape_stores  # noqa: F401
+    from . import vectorize  # noqa: F401
 
 
 PassFactory = Callable[[], Pass]

@@ -41,6 +41,8 @@ from ..ir import BOOL, F32, I32, U32, U64, Block, BufferType, Builder, Function,
 TAPE, TAPE_ROW = "ad_tape", "ad_row_tape"
 TAPE_LANES = 16  # rows interleaved per block of this many lanes (the widest SIMD packet)
 OVERFLOW = 0  # with ``covers``: the element of a row that flags more iterations than C
+TAPE_VALUE = "ad.tape"  # the attribute of a tape store or load: which value of a slot
+# (its position in the row's part of slot 0), for passes/tape_stores.py
 _TYPES = (F32, I32, U32, BOOL, U64)
 
 
@@ -71,8 +73,9 @@ class Checkpoints:
             cap = tb.const(self.cap, I32)
             slot = tb.op(Op.SELECT, I32, tb.op(Op.LT, BOOL, n, cap), n, cap)
             floats = [x for a in state for x in _pack(a, tb)]
-            for x, idx in zip(floats, self._slot(slot, len(floats), self.size, tb)):
-                tb.emit(Op.STORE, [self.buf, idx, x], [])
+            for j, (x, idx) in enumerate(zip(floats, self._slot(slot, len(floats), self.size,
+                                                                 tb))):
+                tb.emit(Op.STORE, [self.buf, idx, x], [], {TAPE_VALUE: self.size + j})
             self.stores.update(id(i) for i in tb.block.instrs)
             body.instrs[:0] = tb.block.instrs
             self.loops[id(ins)] = (self.size, len(floats))
@@ -119,8 +122,9 @@ class Checkpoints:
         pb = Builder(body, end.loc)
         floats = [x for v in used for x in _pack(origin[v], pb)]
         offset, size = self.size, len(floats)
-        for x, idx in zip(floats, self._slot(self.slots[id(loop)], size, offset, pb)):
-            pb.emit(Op.STORE, [self.buf, idx, x], [])
+        for j, (x, idx) in enumerate(zip(floats, self._slot(self.slots[id(loop)], size,
+                                                            offset, pb))):
+            pb.emit(Op.STORE, [self.buf, idx, x], [], {TAPE_VALUE: offset + j})
         body.instrs.append(end)
         self.size += (self.cap + 1) * size
         b = Builder(Block(), loop.loc)
@@ -170,7 +174,8 @@ class Checkpoints:
 
     def _loads(self, slot: Value, size: int, offset: int, b: Builder) -> Iterator[Value]:
         """The ``size`` floats of slot ``slot`` of a loop's part, loaded from the tape."""
-        return iter([b.op(Op.LOAD, F32, self.buf, i) for i in self._slot(slot, size, offset, b)])
+        return iter([b.op(Op.LOAD, F32, self.buf, i, **{TAPE_VALUE: offset + j})
+                     for j, i in enumerate(self._slot(slot, size, offset, b))])
 
     def _slot(self, slot: Value, size: int, offset: int, b: Builder,
               count: int | None = None) -> list[Value]:
