@@ -92,17 +92,17 @@ def _pixel_adjoints(scene: Scene, mod: Any, d: np.ndarray, spp: int, seed: int,
     """``D`` of ``render_sample_loss``: d loss / d pixel over the pixel's total film weight
     (that of the last ``render()`` of the same samples, or the film-weight kernels' of
     ``mod``, the adjoint module: :func:`_film_weights`), over the sample grid grown by the
-    film's reach on each side, zero outside the crop."""
+    film's reach on each side, zero outside the crop, one plane per colour channel."""
     kept = getattr(scene, "film_weights", None)
     if not kept or kept[0] != (spp, seed):
         kept = scene.film_weights = ((spp, seed), _film_weights(scene, mod, spp, seed, threads))
     film = film_uniforms(scene.desc.sensor.film, 1, channels=1)
     h, w, n = film["crop_h"], film["crop_w"], film_reach(film)
     weights = kept[1].reshape(h, w, 1).astype(np.float64)
-    pad = np.zeros((film["grid_h"] + 2 * n, film["grid_w"] + 2 * n, d.shape[2]), np.float32)
+    pad = np.zeros((d.shape[2], film["grid_h"] + 2 * n, film["grid_w"] + 2 * n), np.float32)
     y, x = film["crop_y"] - film["grid_y"] + n, film["crop_x"] - film["grid_x"] + n
-    pad[y:y + h, x:x + w] = d / np.where(weights == 0, 1.0, weights)
-    return pad.reshape(-1)
+    pad[:, y:y + h, x:x + w] = np.moveaxis(d / np.where(weights == 0, 1.0, weights), 2, 0)
+    return pad.reshape(-1)  # a plane per channel (kernel_source.py's _adjoint_source)
 
 
 def _film_weights(scene: Scene, mod: Any, spp: int, seed: int,

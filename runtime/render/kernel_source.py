@@ -236,15 +236,20 @@ def _adjoint_source(film: dict[str, Any], model: ColorModel, value_type: str,
                     holes: dict[str, str]) -> str:
     """``render_sample_loss`` (stdlib/render/adjoint.rdsl.in) for the scene's film: one
     line per pixel a sample reaches, adding its weight times D's value there; and the
-    film-weight kernels, which take the render kernel's ``holes`` for the sample position."""
+    film-weight kernels, which take the render kernel's ``holes`` for the sample position.
+    D holds one plane per channel (runtime/render/backward.py), so that every tap of a
+    packet of neighbouring samples reads each channel at an offset of one index, q: one
+    vector load each (compiler/backends/llvm_runs.py), where interleaved channels took
+    a gather each."""
     n = film_reach(film)
     m, c, row = 2 * n + 1, 1 if model.mono else 3, film["grid_w"] + 2 * n
+    plane = row * (film["grid_h"] + 2 * n)
     make = {"Vec3": "Vec3", "Unpolarized": "Unpolarized"}.get(value_type, "Spectrum")
-    taps = [f"    let b = {c} * q;"]
+    taps = []
     for dy in range(m):
         for dx in range(m):
-            at = c * (dy * row + dx)
-            px = ", ".join(f"D[b + {at + k}]" for k in range(c))
+            at = dy * row + dx
+            px = ", ".join(f"D[q + {k * plane + at}]" for k in range(c))
             taps.append(f"    a = a + f.w{dx} * f.w{m + dy} * {make}({px});")
     return fill({**holes, "value_type": value_type, "pad_w": str(row),
                  "zero": f"{make}(0.0)", "taps": "\n".join(taps)}, ADJOINT)
