@@ -5,11 +5,12 @@ A gather whose lanes turn out to read consecutive elements (``idx[k] == first + 
 one masked vector load (``llvm_ops._gather_or_load``; scatters likewise).  The check costs
 a handful of instructions, and kernels read many arrays at offsets of one index: the
 film's planes ``S[(c + dx) * ns + i]`` (five per tap), a sample's row of the adjoint's
-tape ``ad_row_tape + j * 16`` (every carried value of a bounce).  An index ``x + u`` (``u``
-uniform, broadcast; or ``x - u``) is consecutive exactly when ``x`` is, with ``first`` shifted by ``u``
-(in i32's wrapping arithmetic both ways), so :func:`consecutive_run` checks ``x`` once
-per execution mask and reuses the check for every offset of it, in the IR block where it
-was made and the blocks nested in it (which it dominates; ``Lowering.block`` scopes it).
+tape ``ad_row_tape + j * 16`` (every carried value of a bounce).  An index ``x + u`` or
+``x - u`` (``u`` uniform, broadcast) is consecutive exactly when ``x`` is, with ``first``
+shifted by ``u`` (in i32's wrapping arithmetic both ways), so :func:`consecutive_run`
+checks ``x`` once per execution mask and reuses the check for every offset of it, in the
+IR block where it was made and the blocks nested in it (which it dominates;
+``Lowering.block`` scopes it).
 """
 
 from __future__ import annotations
@@ -52,12 +53,10 @@ def consecutive_run(lw: Any, idx: ir.Value, mask: L.Value) -> tuple[L.Value, L.V
     has ``idx[k] == first + k`` (i32 indices): then a masked vector access at ``first``
     touches exactly the active lanes' elements (see the module's docstring for the reuse)."""
     base, offset = _base_and_offset(lw, idx)
-    key = (base, id(mask))
-    hit = lw.runs.get(key)
-    if hit is None or hit[2] is not mask:
-        first, ok = _consecutive(lw, lw.v(base), mask.type.count, mask)
-        lw.runs[key] = hit = (first, ok, mask)
-    first, ok = hit[0], hit[1]
+    key = (base, id(mask))  # the entry holds the mask too, so its id is not reused
+    if key not in lw.runs:
+        lw.runs[key] = (*_consecutive(lw, lw.v(base), mask.type.count, mask), mask)
+    first, ok, _ = lw.runs[key]
     return (first if offset is None else lw.b.add(first, offset)), ok
 
 

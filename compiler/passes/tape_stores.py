@@ -36,8 +36,8 @@ class TapeStores(Pass):
 def _drop(block: Block, read: set[int]) -> bool:
     """Remove the stores of tape values not in ``read`` from ``block`` and its regions."""
     kept = [i for i in block.instrs
-            if not (i.op is Op.STORE and i.attrs.get(TAPE_VALUE, -1) not in read
-                    and TAPE_VALUE in i.attrs)]
+            if not (i.op is Op.STORE and TAPE_VALUE in i.attrs
+                    and i.attrs[TAPE_VALUE] not in read)]
     changed = len(kept) != len(block.instrs)
     block.instrs = kept
     for ins in kept:
