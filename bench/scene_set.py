@@ -19,6 +19,11 @@ DRJIT_LIBLLVM_PATH), else `scalar_rgb`; the table says which.
 --ttfp: the time to first pixel of a new scene, cold: the whole ``rdsl render --spp 1``
 command with an empty kernel cache, against a fresh Python process that imports Mitsuba 3,
 loads the scene and renders 1 spp with an empty Dr.Jit kernel cache (HOME in a fresh folder).
+Then a new scene of a user who rendered before (only the parsed stdlib kept), and an edited
+scene: a copy with one colour changed (its last ``<rgb>``, times 0.9), rendered with the
+kernel cache the runs before it left, by rdsl and by Mitsuba 3 (whose Dr.Jit cache then
+holds its kernels too).  rdsl's Python modules are byte-compiled first, as pip does when it
+installs a package (``PYTHONDONTWRITEBYTECODE`` would otherwise make every run compile them).
 """
 
 from __future__ import annotations
@@ -130,7 +135,8 @@ def _timed(cmd: list[str], env: dict[str, str]) -> tuple[float, float]:
 def cold_ttfp(path: Path, threads: int, variant: str) -> dict[str, float]:
     """Wall and CPU seconds of a cold ``rdsl render --spp 1`` (empty cache), of the same
     with only the parsed-source cache kept (a new scene of a user who rendered before: the
-    stdlib is parsed, no kernel is cached), and of a cold Mitsuba 3 first render."""
+    stdlib is parsed, no kernel is cached), and of a cold Mitsuba 3 first render; then the
+    wall seconds of both on an edited copy (:func:`edited_copy`), their caches kept."""
     with tempfile.TemporaryDirectory() as tmp:
         cache = Path(tmp) / "cache"
         env = dict(os.environ, RDSL_CACHE_DIR=str(cache))
@@ -142,15 +148,39 @@ def cold_ttfp(path: Path, threads: int, variant: str) -> dict[str, float]:
             if entry.name != "ast":
                 shutil.rmtree(entry)
         tn, cn = _timed(cmd, env)
+        edited = edited_copy(path, Path(tmp) / "edit")
+        te, _ = _timed([*cmd[:4], str(edited), *cmd[5:]], env)
         kw = ", ".join(f"{k}={v}" for k, v in scene_defaults(path).items())
-        code = (f"import mitsuba as mi, drjit as dr; mi.set_variant('{variant}')\n"
-                + (f"dr.set_thread_count({threads})\n" if "llvm" in variant else "")
-                + f"s = mi.load_file({str(path)!r}{', ' + kw if kw else ''})\n"
-                "import numpy as np; np.array(mi.render(s, spp=1))\n")
+
+        def mitsuba(scene: Path) -> list[str]:
+            return [sys.executable, "-c",
+                    f"import mitsuba as mi, drjit as dr; mi.set_variant('{variant}')\n"
+                    + (f"dr.set_thread_count({threads})\n" if "llvm" in variant else "")
+                    + f"s = mi.load_file({str(scene)!r}{', ' + kw if kw else ''})\n"
+                    "import numpy as np; np.array(mi.render(s, spp=1))\n"]
+
         env = dict(os.environ, HOME=tmp)  # Dr.Jit's kernel cache lives in ~/.drjit
-        tm, cm = _timed([sys.executable, "-c", code], env)
+        tm, cm = _timed(mitsuba(path), env)
+        tme, _ = _timed(mitsuba(edited), env)
     return {"ttfp_rdsl": tr, "ttfp_mitsuba": tm, "ttfp_cpu_rdsl": cr, "ttfp_cpu_mitsuba": cm,
-            "ttfp_new_rdsl": tn, "ttfp_new_cpu_rdsl": cn}
+            "ttfp_new_rdsl": tn, "ttfp_new_cpu_rdsl": cn, "ttfp_edit_rdsl": te,
+            "ttfp_edit_mitsuba": tme}
+
+
+def edited_copy(path: Path, folder: Path) -> Path:
+    """``path`` with its last ``<rgb ... value="r, g, b"/>`` times 0.9, written into
+    ``folder`` beside links to the other files of its folder (meshes, textures)."""
+    import re
+
+    text = path.read_text()
+    m = list(re.finditer(r'(<rgb\b[^>]*\bvalue=")([^"]+)(")', text))[-1]
+    value = ", ".join(f"{0.9 * float(v):.6g}" for v in m[2].replace(",", " ").split())
+    folder.mkdir()
+    for f in path.parent.iterdir():
+        if f.name != path.name:
+            (folder / f.name).symlink_to(f)
+    (folder / path.name).write_text(text[:m.start(2)] + value + text[m.end(2):])
+    return folder / path.name
 
 
 def geomean(xs: list[float]) -> float:
@@ -175,6 +205,10 @@ def main() -> None:
           f"{args.threads} threads; RMSE against Mitsuba at {args.ref_spp} spp", flush=True)
     print(f"{'scene':<26} {'rdsl s':>7} {'mi s':>7} {'time':>6} {'eq-err':>6} {'cpu':>5} "
           f"{'pairs':>11} {'rmse rdsl':>9} {'rmse mi':>9}")
+    if args.ttfp or args.ttfp_only:  # as pip does for an installed package
+        import compileall
+
+        compileall.compile_dir(str(ROOT), quiet=1, workers=1)
     rows = []
     for name in names:
         r = {"scene": name} if args.ttfp_only else measure(name, scenes[name], args)
@@ -197,7 +231,8 @@ def _line(r: dict) -> str:
                  f"{r['rdsl_rmse']:9.5f} {r['mitsuba_rmse']:9.5f}")
     if "ttfp_rdsl" in r:
         line += (f"  ttfp {r['ttfp_rdsl']:.2f} s (new scene {r['ttfp_new_rdsl']:.2f} s) vs "
-                 f"{r['ttfp_mitsuba']:.2f} s; cpu {r['ttfp_cpu_rdsl']:.2f} s "
+                 f"{r['ttfp_mitsuba']:.2f} s; edited {r['ttfp_edit_rdsl']:.2f} s vs "
+                 f"{r['ttfp_edit_mitsuba']:.2f} s; cpu {r['ttfp_cpu_rdsl']:.2f} s "
                  f"({r['ttfp_new_cpu_rdsl']:.2f} s) vs {r['ttfp_cpu_mitsuba']:.2f} s")
     return line
 
@@ -212,14 +247,16 @@ def _summary(rows: list[dict]) -> None:
                  for k in ("", "new_")}
         cpu = {k: geomean([r[f"ttfp_{k}rdsl"] / r["ttfp_cpu_mitsuba"] for r in rows])
                for k in ("cpu_", "new_cpu_")}
+        edit = geomean([r["ttfp_edit_rdsl"] / r["ttfp_edit_mitsuba"] for r in rows])
         print(f"time to first pixel, rdsl / Mitsuba (geometric mean): cold {ratio['']:.2f} "
               f"(cpu {cpu['cpu_']:.2f}), new scene {ratio['new_']:.2f} "
-              f"(cpu {cpu['new_cpu_']:.2f})")
+              f"(cpu {cpu['new_cpu_']:.2f}), edited scene {edit:.2f}")
     print("time = rdsl s / Mitsuba s at the same spp; eq-err = ratio of times to equal RMSE; "
           "cpu = ratio of CPU seconds; pairs = the lowest and highest ratio of one rdsl run to "
           "the Mitsuba run beside it (the noise); ttfp: a whole `rdsl render --spp 1` with an "
-          "empty cache (new scene: only the parsed stdlib cached) against a fresh Python "
-          "process's Mitsuba 3 first render with an empty Dr.Jit cache")
+          "empty cache (new scene: only the parsed stdlib cached; edited: one colour changed, "
+          "the caches kept) against a fresh Python process's Mitsuba 3 first render with an "
+          "empty Dr.Jit cache (edited: its cache kept)")
 
 
 if __name__ == "__main__":

@@ -6,6 +6,12 @@ does not depend on parameter values, reserves room for them at the end of ``PRM`
 them in its manifest (``tables``: the table function, its sampling, the instance, the offset).
 :func:`fill_tables` computes them for the scene's values with the same compiled table
 kernels (:func:`rdsl.compiler.precompute.tabulate`) and returns the complete ``PRM``.
+
+Computing them needs the plugins' IR (the frontend over the kernel's whole source: 0.3 s),
+so each table's samples are kept on disk too, keyed by the generic kernels' cache entry
+(which hashes every source they were built from) and by the instance's plain values (those
+a table may depend on): a scene rendered again with other colours, the generic build
+standing in (runtime/render/stand_in.py), fills its tables without the frontend.
 """
 
 from __future__ import annotations
@@ -31,13 +37,21 @@ def fill_tables(mod: Any, scene: SceneSpec, prm: np.ndarray, source: str | Path,
     entries = (mod.manifest or {}).get("tables") or []
     if not entries:
         return prm
-    from ..compiler.precompute import table_params, table_size, tabulate
+    from ..compiler.precompute import (load_samples, store_samples, table_params, table_size,
+                                       tabulate)
 
-    module = _lowered(source, filename, tuple(str(p) for p in search_paths or ()))
     size = max(int(e["offset"]) + table_size(e) for e in entries)
     out = np.zeros(max(size, len(prm), 1), np.float32)
     out[:len(prm)] = prm
-    for e in entries:
+    files = [_samples_file(mod, e, getattr(scene, e["kind"])[e["index"]]) for e in entries]
+    kept = [None if f is None else load_samples(f, table_size(e))
+            for f, e in zip(files, entries)]
+    if all(k is not None for k in kept):
+        for e, samples in zip(entries, kept):
+            out[e["offset"]:e["offset"] + table_size(e)] = samples
+        return out
+    module = _lowered(source, filename, tuple(str(p) for p in search_paths or ()))
+    for e, file in zip(entries, files):
         inst = getattr(scene, e["kind"])[e["index"]]
         params = table_params(module.functions[e["fn"] + ".read"], inst)
         # the same plugin source, table and values give the same samples (a test harness
@@ -49,8 +63,30 @@ def fill_tables(mod: Any, scene: SceneSpec, prm: np.ndarray, source: str | Path,
             samples = tabulate(module, e, params)
             with _lock:
                 _samples[key] = samples
+        if file is not None:
+            store_samples(file, samples)
         out[e["offset"]:e["offset"] + table_size(e)] = samples
     return out
+
+
+def _samples_file(mod: Any, entry: dict[str, Any], inst: Any) -> Path | None:
+    """Where the samples of table ``entry`` of ``mod`` (generic kernels loaded from the
+    kernel cache) for instance ``inst`` are kept: ``<cache>/tables/fill-<sha256>.npy`` of
+    the kernels' entry name, the table and the instance's plain values (a colour or a
+    texture cannot reach a table: compiler/precompute.py); None for kernels outside the
+    cache."""
+    import hashlib
+
+    from ..core.cachedir import cache_dir
+
+    path = getattr(mod, "path", None)
+    if path is None or Path(path).parent.parent != cache_dir():
+        return None
+    plain = (bool, int, float, np.bool_, np.integer, np.floating)
+    values = sorted((k, repr(v)) for k, v in inst.params.items() if isinstance(v, plain))
+    what = repr((Path(path).parent.name, entry["fn"], entry.get("n"), entry.get("lo"),
+                 entry.get("hi"), entry.get("sum"), values))
+    return cache_dir() / "tables" / f"fill-{hashlib.sha256(what.encode()).hexdigest()}.npy"
 
 
 def _lowered(source: str | Path, filename: str | None, search_paths: tuple[str, ...]) -> Any:

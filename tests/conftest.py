@@ -12,6 +12,12 @@ Assigning a scene parameter does not start a speculative build of the adjoint ke
 (``RDSL_PREBUILD=0``, runtime/render/prebuild.py) but in tests/test_prebuild.py: the
 suite's workers keep both cores busy, and most tests that assign parameters never call
 ``backward``.
+
+A small render of a scene whose kernels are not cached renders with the generic build's
+kernels standing in (runtime/render/stand_in.py) but in tests/test_stand_in.py
+(``RDSL_GENERIC_FIRST=0``): the generic build agrees with the specialized one to float
+rounding, not bit for bit, and which one a test got would depend on what the tests before
+it left in the worker's shared kernel cache.
 """
 
 from __future__ import annotations
@@ -22,6 +28,7 @@ import pytest
 
 os.environ.setdefault("RDSL_QUICK", "1")
 os.environ.setdefault("RDSL_PREBUILD", "0")
+os.environ.setdefault("RDSL_GENERIC_FIRST", "0")
 
 FULL_TIER = {"test_llvm_backend", "test_differential", "test_c_abi", "test_kernel_layouts",
              "test_bit_identical", "test_quick_tier"}

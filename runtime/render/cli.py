@@ -16,6 +16,7 @@ from typing import Any
 from ...compiler.diagnostics import CompileError
 from ...core.color import VARIANTS
 from .image import write_render
+from .stand_in import is_stand_in, tier_words
 from .progress import summary_line
 
 
@@ -145,7 +146,8 @@ def render_command(args: Any) -> int:
     mod = scene.compile(quick=scene.quick_fits(spp))
     how = "kernels from cache" if scene.from_cache else \
         f"compiled in {scene.compile_seconds:.2f} s"
-    how += " (quick tier)" if getattr(mod, "quick", False) else ""
+    how += (" (generic build standing in)" if is_stand_in(mod)
+            else " (quick tier)" if getattr(mod, "quick", False) else "")
     if args.report:
         _print_report(scene, mod)
     t1 = time.perf_counter()
@@ -183,7 +185,6 @@ def _print_report(scene: Any, mod: Any) -> None:
         f"{generic} generic ({100 * (spec - generic) / generic:+.0f}%)" if generic is not None
         else "no generic build (an integer parameter of 2**24 or more)"))
     k = mod.manifest["kernels"]
-    tier = ("quick tier: LLVM O0, for a small render not cached yet"
-            if getattr(mod, "quick", False) else "full tier: LLVM O3")
+    tier = tier_words(mod)
     print(f"kernels: {', '.join(x['name'] for x in k)} for `{mod.target}` "
           f"(width {mod.width}, variant {scene.build.model.name}), {tier}")

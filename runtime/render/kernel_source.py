@@ -288,7 +288,6 @@ def kernel_source(desc: Any, bufs: SceneBuffers, bsdfs: list[Instance],
                  "    let wavelength_weight = sample_wavelengths(u_wavelength);"] if spectral
                 else ["    let rng = pcg32_seed(UInt64(seed), stream);"])
     holes = {
-        "scene_name": Path(desc.path).name,
         "imports": "\n".join(_imports(spectral, plugins)),
         "value_type": value_type,
         "value": value,

@@ -37,6 +37,7 @@ from ..scene import load_scene_description
 from ..scene.reads import recording
 from ..scene.samplers import requested_samples, sample_count
 from ..tables import fill_tables
+from .stand_in import generic_stand_in, is_stand_in
 from .bsdfs import (
     dispersion_warnings,
     polarization_warnings,
@@ -189,14 +190,17 @@ class Scene:
         or loaded already; without it, quick kernels loaded before are replaced."""
         from ...runtime.api import jit, jit_cached, quick_everywhere
 
+        small = quick  # a render the quick tier's size: the generic build may stand in
         quick = quick or quick_everywhere()  # RDSL_QUICK=1: the full tier is never built
-        loaded_quick = getattr(self._module, "quick", False)  # a PTX module has no tiers
+        # a PTX module has no tiers; a generic stand-in is replaced as the quick tier is
+        loaded_quick = getattr(self._module, "quick", False) or is_stand_in(self._module)
         if self._module is not None and not again and (quick or not loaded_quick):
             return self._module
         src, kw = self._jit_inputs = self._jit_args()
         wait_for_speculated(self, quick)  # a background build of these kernels (prebuild.py)
-        try:
-            mod = jit(src, quick=quick and not jit_cached(src, **kw), **kw)
+        try:  # a small render not cached yet: the generic build's kernels (stand_in.py)
+            mod = generic_stand_in(self, small, src, kw) or \
+                jit(src, quick=quick and not jit_cached(src, **kw), **kw)
         except NoRayTracer:  # one line: what is missing, not the integrator's source
             raise CompileError(_no_ray_tracer(self.path, self.build.target.name)) from None
         if not self.specialize:  # and so do the tables the plugins compute per scene
@@ -232,7 +236,7 @@ class Scene:
         from ...runtime.api import quick_everywhere
         from .tier_up import RENDERS_BEFORE_TIER_UP, TierUp
 
-        if not getattr(mod, "quick", False) or quick_everywhere():
+        if not (getattr(mod, "quick", False) and not quick_everywhere() or is_stand_in(mod)):
             return mod
         if self._tier_up is None:
             if self._quick_renders is not None:  # None: built already (or it failed)

@@ -1,0 +1,89 @@
+"""The generic build standing in for a small render's specialized kernels.
+
+A specialized kernel folds the scene's parameter values: editing one value in the XML (a
+reflectance, a roughness, a light's radiance) makes a new kernel, and a new kernel is a
+compile (1.5-2 s on the material preview, more with tables), however small the render.
+The generic build reads those values from ``PRM`` at run time; its kernel depends only on
+the scene's structure (its plugin types, emitter and shape kinds: what specialization
+folds in both builds), so it is shared by every scene of that structure and, once built,
+in the kernel cache for all of them.
+
+So a small render (the quick tier's size, ``renderer.QUICK_SAMPLES``) of a scene whose own
+kernels are in the cache in neither tier renders with the generic build's kernels: loaded
+from the cache when a scene of the same structure was rendered before (the full tier if
+there, else the quick tier), else compiled at the quick tier, which costs what the
+specialized quick tier costs and serves every later edit of the scene's values.  From the
+scene's second render on, its specialized kernels are built in the background and replace
+the stand-in when ready (runtime/render/tier_up.py), as the quick tier is replaced; a large
+render compiles them at once.  The generic build renders the specialized build's image to
+float rounding (within 1e-5 absolute; tests/test_generic_build.py and
+tests/test_stand_in.py), not bit for bit: functions the specialized build evaluates at
+compile time on constants (``evaluate``) run as compiled code here.
+
+Not a stand-in: a scene loaded generic already, a differentiated twin, a scene whose
+integers the generic build cannot hold (2**24 or more), a target other than the LLVM CPU
+ones, and any render with ``RDSL_GENERIC_FIRST=0`` (the test suite sets it, so that a
+test's kernels do not depend on what an earlier test left in the shared cache; the tests
+of this file turn it on).
+"""
+
+from __future__ import annotations
+
+import os
+from typing import TYPE_CHECKING, Any
+
+from ...compiler.diagnostics import CompileError
+
+if TYPE_CHECKING:
+    from .renderer import Scene
+
+STAND_IN_ENV = "RDSL_GENERIC_FIRST"
+
+
+def enabled() -> bool:
+    """Whether small renders may use the generic build's kernels (``RDSL_GENERIC_FIRST``)."""
+    return os.environ.get(STAND_IN_ENV, "1") not in ("0", "")
+
+
+def is_stand_in(mod: Any) -> bool:
+    """Whether ``mod`` is the generic build standing in for a scene's own kernels."""
+    return bool(getattr(mod, "stand_in", False))
+
+
+def generic_stand_in(scene: Scene, small: bool, src: str, kw: dict[str, Any]) -> Any | None:
+    """The generic build's kernels for ``scene`` (specialized; ``small``: for a render the
+    quick tier's size; ``src`` and ``kw`` what
+    :func:`rdsl.runtime.api.jit` builds its own kernels from), with ``scene.prm`` set to
+    their parameters and tables, or None where they should not stand in (see the module's
+    docstring)."""
+    from ..api import jit, jit_cached
+
+    build = scene.build
+    if not (enabled() and small and scene.specialize and build.target.backend == "llvm"
+            and build.ad is None and not scene.derivative):
+        return None
+    if jit_cached(src, **kw) or jit_cached(src, quick=True, **kw):
+        return None  # the scene's own kernels are at hand
+    try:
+        generic, prm = scene.parameter_slots(kw["scene"])
+    except CompileError:  # an integer only the specialized build holds
+        return None
+    options = dict(kw, scene=generic)
+    mod = jit(src, quick=not jit_cached(src, **options), **options)
+    mod.stand_in = True
+    from ..tables import fill_tables
+
+    scene.prm = fill_tables(mod, scene.scene_spec, prm, src, kw["filename"],
+                            scene.search_paths)
+    return mod
+
+
+def tier_words(mod: Any) -> str:
+    """What ``rdsl render --report`` says about the tier of ``mod``."""
+    level = "quick tier: LLVM O0" if getattr(mod, "quick", False) else "full tier: LLVM O3"
+    if is_stand_in(mod):
+        return (f"generic build standing in ({level}; parameters read from PRM at run time) "
+                "until the scene's own kernels are built: a small render not cached yet")
+    if getattr(mod, "quick", False):
+        return f"{level}, for a small render not cached yet"
+    return level

@@ -1,0 +1,161 @@
+"""The generic build standing in for a small render's specialized kernels
+(runtime/render/stand_in.py): a scene whose own kernels are not cached renders with the
+generic ones, which every scene of the same structure shares, so that editing a value
+compiles nothing; the image is the specialized build's to float rounding; the scene's own
+kernels replace the stand-in from its second render on, and a large render compiles them at
+once."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+pytest.importorskip("rdsl.runtime.embree")
+
+from _scenes import CBOX, edited_copy
+from rdsl.cli import main
+from rdsl.runtime.render import renderer
+from rdsl.runtime.render.renderer import load_scene
+from rdsl.runtime.render.stand_in import is_stand_in
+from rdsl.runtime.render.tier_up import RENDERS_BEFORE_TIER_UP
+
+pytestmark = pytest.mark.skipif(not CBOX.is_file(), reason=f"needs {CBOX}")
+
+RED = "0.570068, 0.0430135, 0.0443706"  # the red wall's reflectance
+
+
+@pytest.fixture
+def cache(tmp_path, monkeypatch):
+    """A kernel cache of this test's own, and stand-ins allowed (conftest.py forbids them)."""
+    monkeypatch.setenv("RDSL_CACHE_DIR", str(tmp_path / "cache"))
+    monkeypatch.setenv("RDSL_GENERIC_FIRST", "1")
+    return tmp_path
+
+
+def reads_prm(mod) -> bool:
+    """Whether ``mod``'s render kernel reads parameters at run time (a generic build)."""
+    kernel = next(k for k in mod.manifest["kernels"] if k["name"] == "render_sample")
+    return any(p["name"] == "PRM" for p in kernel["params"])
+
+
+def specialized_image(path, spp=2, seed=5, **defaults):
+    """The image of the scene's own (specialized) kernels."""
+    s = load_scene(path, **defaults)
+    s.compile()  # the full tier, as a large render gets: never a stand-in
+    assert not is_stand_in(s._module)
+    return s.render(spp=spp, seed=seed)
+
+
+def test_an_edited_value_renders_from_the_cache(cache):
+    a = load_scene(CBOX, res=16)
+    img_a = a.render(spp=2, seed=5)
+    assert is_stand_in(a._module) and not a.from_cache and a.prm.size > 1
+    (cache / "edit").mkdir()
+    path = edited_copy(CBOX, cache / "edit", RED, "0.2, 0.6, 0.3")
+    b = load_scene(path, res=16)
+    img_b = b.render(spp=2, seed=5)
+    assert is_stand_in(b._module) and b.from_cache  # the same structure: no compile
+    for path_, img in ((CBOX, img_a), (path, img_b)):
+        np.testing.assert_allclose(img, specialized_image(path_, res=16), rtol=0, atol=1e-5)
+    assert not np.allclose(img_a, img_b, atol=1e-3)  # the edited value did reach the kernel
+    # an integrator's depth is a value too; the film's size is in the kernel's text
+    for defaults, cached in (({"max_depth": 3}, True), ({"res": 24}, False)):
+        c = load_scene(CBOX, **{"res": 16, **defaults})
+        c.render(spp=1)
+        assert is_stand_in(c._module) and c.from_cache == cached, defaults
+
+
+def test_the_scenes_own_kernels_replace_the_stand_in(cache):
+    s = load_scene(CBOX, res=16)
+    first = s.render(spp=2, seed=1)
+    assert is_stand_in(s._module)
+    for _ in range(RENDERS_BEFORE_TIER_UP - 1):
+        s.render(spp=2, seed=1)
+    job = s._tier_up
+    assert job is not None, "the second render starts the specialized build"
+    assert job.proc.wait() == 0
+    last = s.render(spp=2, seed=1)
+    assert not is_stand_in(s._module) and not reads_prm(s._module)
+    np.testing.assert_allclose(last, first, rtol=0, atol=1e-5)
+
+
+def test_a_large_render_and_a_cached_scene_use_their_own_kernels(cache, monkeypatch):
+    monkeypatch.setattr(renderer, "QUICK_SAMPLES", 16 * 16 * 1)
+    s = load_scene(CBOX, res=16)
+    s.render(spp=2)  # 512 samples: beyond the (patched) quick tier's size
+    assert not is_stand_in(s._module) and not reads_prm(s._module)
+    monkeypatch.undo()
+    monkeypatch.setenv("RDSL_CACHE_DIR", str(cache / "cache"))
+    monkeypatch.setenv("RDSL_GENERIC_FIRST", "1")
+    again = load_scene(CBOX, res=16)
+    again.render(spp=1)  # small, but its own full tier is cached
+    assert not is_stand_in(again._module) and again.from_cache
+
+
+@pytest.mark.parametrize("why", ["generic already", "switched off", "integer too large"])
+def test_no_stand_in(cache, monkeypatch, why):
+    path = CBOX
+    if why == "switched off":
+        monkeypatch.setenv("RDSL_GENERIC_FIRST", "0")
+    if why == "integer too large":  # max_depth 2**25: only the specialized build holds it
+        path = edited_copy(CBOX, cache, 'name="max_depth" value="$max_depth"',
+                           'name="max_depth" value="33554432"')
+    s = load_scene(path, res=8, specialize=why != "generic already")
+    s.render(spp=1)
+    assert not is_stand_in(s._module)
+    assert reads_prm(s._module) == (why == "generic already")
+
+
+def test_cli_says_which_build_rendered(cache, capsys):
+    out = cache / "cbox.exr"
+    argv = ["render", str(CBOX), "-D", "res=16", "--spp", "1", "-o", str(out), "--quiet"]
+    assert main([*argv, "--report"]) == 0
+    text = capsys.readouterr().out
+    assert "generic build standing in (quick tier: LLVM O0; parameters read from PRM" in text
+    assert "(generic build standing in)" in text.splitlines()[-1]
+    assert main(argv) == 0  # the second command: the generic kernels from the cache
+    assert "kernels from cache (generic build standing in)" in capsys.readouterr().out
+
+
+ROUGH = """<scene version="3.0.0">
+    <integrator type="path"><integer name="max_depth" value="4"/></integrator>
+    <sensor type="perspective"><float name="fov" value="40"/>
+        <transform name="to_world"><lookat origin="0, -6, 3" target="0, 0, 0" up="0, 0, 1"/>
+        </transform>
+        <film type="hdrfilm"><integer name="width" value="16"/><integer name="height"
+            value="16"/><rfilter type="box"/></film></sensor>
+    <emitter type="constant"><rgb name="radiance" value="0.5, 0.6, 0.7"/></emitter>
+    <shape type="sphere"><bsdf type="roughplastic"><float name="alpha" value="ALPHA"/>
+        <rgb name="diffuse_reflectance" value="COLOUR"/></bsdf></shape>
+</scene>"""
+
+
+def test_tables_of_an_edited_scene_come_from_the_cache(cache, monkeypatch):
+    """A rough plastic's tables (a function of its alpha): an edited colour reads them back
+    from the disk without the frontend; an edited alpha computes new ones; every image is
+    the specialized build's."""
+    from rdsl.runtime import tables
+
+    def write(alpha, colour):
+        folder = cache / f"{alpha}-{colour.replace(', ', '-')}"
+        folder.mkdir()
+        path = folder / "rough.xml"
+        path.write_text(ROUGH.replace("ALPHA", alpha).replace("COLOUR", colour))
+        return path
+
+    first = load_scene(write("0.3", "0.5, 0.2, 0.1"))
+    first.render(spp=2, seed=3)
+    assert is_stand_in(first._module) and first.prm.size > 1
+    frontend = tables._lowered
+    for alpha, colour, reads in (("0.3", "0.1, 0.6, 0.2", False), ("0.1", "0.1, 0.6, 0.2", True)):
+        calls = []
+        monkeypatch.setattr(tables, "_lowered", lambda *a: calls.append(a) or frontend(*a))
+        tables._samples.clear()
+        tables._ir.clear()
+        path = write(alpha, colour)
+        s = load_scene(path)
+        img = s.render(spp=2, seed=3)
+        assert is_stand_in(s._module) and s.from_cache
+        assert bool(calls) == reads, (alpha, colour)
+        np.testing.assert_allclose(img, specialized_image(path, spp=2, seed=3),
+                                   rtol=0, atol=1e-5)
