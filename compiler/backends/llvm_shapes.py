@@ -46,7 +46,7 @@ from typing import Any
 import llvmlite.ir as L
 
 from ...core.embree_abi import HIT_FIELDS, RAY_FIELDS, USER_BLOCK, USER_CALLBACKS, EmbreeError
-from .native_lib import address_of, load_native
+from .native_lib import address_of, load_native_from
 
 _engine: Any = None
 _addresses: dict[str, int] = {}
@@ -64,15 +64,19 @@ def callback_addresses() -> dict[str, int]:
 
             llvm.initialize_native_target()
             llvm.initialize_native_asmprinter()
-            mod = llvm.parse_assembly(str(build_module()))
-            mod.verify()
-            target = llvm.Target.from_default_triple()
-            tm = target.create_target_machine(cpu=llvm.get_host_cpu_name(),
-                                              features=llvm.get_host_cpu_features().flatten(),
-                                              opt=3, reloc="pic")
-            _optimize(llvm, mod, tm)
-            machine = f"{llvm.get_host_cpu_name()} {llvm.get_host_cpu_features().flatten()}"
-            lib = load_native(mod, tm, machine, "the Embree user-geometry callbacks")
+            text = str(build_module())
+            cpu, features = llvm.get_host_cpu_name(), llvm.get_host_cpu_features().flatten()
+
+            def build() -> tuple[Any, Any]:  # only when the library is not cached
+                mod = llvm.parse_assembly(text)
+                mod.verify()
+                tm = llvm.Target.from_default_triple().create_target_machine(
+                    cpu=cpu, features=features, opt=3, reloc="pic")
+                _optimize(llvm, mod, tm)
+                return mod, tm
+
+            lib = load_native_from(text, f"{cpu} {features} O3", "the Embree user-geometry "
+                                   "callbacks", build)
             addrs = {n: address_of(lib, f"rdsl_user_{n}") for n in USER_CALLBACKS}
             if not all(addrs.values()):
                 raise EmbreeError("the compiled user-geometry callbacks are incomplete")
