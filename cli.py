@@ -14,8 +14,7 @@ from collections.abc import Callable
 from typing import Any
 
 from .compiler import cli as compiler_cli
-from .compiler.diagnostics import CompileError
-from .compiler.driver import InternalError
+from .compiler.diagnostics import CompileError, InternalError
 from .runtime.render import bench as bench_cli
 from .runtime.render import cli as render_cli
 from .runtime.testkit import cli as testkit_cli

@@ -96,3 +96,8 @@ def read_source_file(path: Path) -> str:
         loc = Loc(str(path), line, col)
         raise CompileError(Diagnostic(loc, f"the file is not UTF-8 from here: byte 0x{data[e.start]:02x} "
                                            f"({e.reason})")) from None
+
+
+class InternalError(Exception):
+    """A bug in rdsl (not the user's fault), tagged with the pass that hit it
+    (compiler/driver.py)."""

@@ -16,7 +16,7 @@ from typing import TextIO
 from ..core.gcpause import gc_paused
 from ..core.scene_spec import SceneSpec
 from .build import Build
-from .diagnostics import CompileError
+from .diagnostics import CompileError, InternalError  # noqa: F401 (InternalError re-exported)
 from .ir import Module
 from .passes import Pass
 from .passes.ad_forward import AdForward
@@ -31,10 +31,6 @@ from .passes.specialize import Specialize
 from .passes.tape_stores import TapeStores
 from .passes.vectorize import Vectorize
 from .sources import PRELUDE, STDLIB, is_path, source_files  # noqa: F401 (re-exported)
-
-
-class InternalError(Exception):
-    """A bug in rdsl (not the user's fault), tagged with the pass that hit it."""
 
 
 def pipeline(build: Build, scene: SceneSpec | None = None,

@@ -222,6 +222,7 @@ class BufferType(Type):
 
 
 F32 = ScalarType("f32")
+F32_OVERFLOW = 2.0**128 * (1.0 - 2.0**-25)  # FLT_MAX + half an ulp: rounds to infinity
 I32 = ScalarType("i32")
 U32 = ScalarType("u32")
 U64 = ScalarType("u64")

@@ -23,16 +23,16 @@ from lark.exceptions import (
 from lark.lark import PostLex
 
 from ..compiler.diagnostics import CompileError, Diagnostic, register_source
-from ..compiler.ir import Loc
+from ..compiler.ir import F32_OVERFLOW, Loc
 from ..core.cachedir import cache_dir, compiler_fingerprint, write_atomically
 from . import ast as A
 
 _GRAMMAR = Path(__file__).with_name("grammar.lark")
 
 
-# float32 rounds to infinity from FLT_MAX + half an ulp, and to zero below half the smallest
-# subnormal (2^-150); a literal out there would change meaning silently, as C compilers warn
-F32_OVERFLOW = 2.0**128 * (1.0 - 2.0**-25)
+# float32 rounds to infinity from F32_OVERFLOW (compiler/ir.py), and to zero below half the
+# smallest subnormal (2^-150); a literal out there would change meaning silently, as C
+# compilers warn
 _F32_UNDERFLOW = 2.0**-150
 
 

@@ -64,25 +64,33 @@ def callback_addresses() -> dict[str, int]:
 
             llvm.initialize_native_target()
             llvm.initialize_native_asmprinter()
-            text = str(build_module())
             cpu, features = llvm.get_host_cpu_name(), llvm.get_host_cpu_features().flatten()
 
             def build() -> tuple[Any, Any]:  # only when the library is not cached
-                mod = llvm.parse_assembly(text)
+                mod = llvm.parse_assembly(str(build_module()))
                 mod.verify()
                 tm = llvm.Target.from_default_triple().create_target_machine(
                     cpu=cpu, features=features, opt=3, reloc="pic")
                 _optimize(llvm, mod, tm)
                 return mod, tm
 
-            lib = load_native_from(text, f"{cpu} {features} O3", "the Embree user-geometry "
-                                   "callbacks", build)
+            # the IR is this file's (and core/embree_abi.py's) doing, which the compiler's
+            # fingerprint in the key covers, and llvmlite's: it is not even built when cached
+            lib = load_native_from(f"rdsl_embree_user llvmlite {_llvmlite_version()}",
+                                   f"{cpu} {features} O3", "the Embree user-geometry callbacks",
+                                   build)
             addrs = {n: address_of(lib, f"rdsl_user_{n}") for n in USER_CALLBACKS}
             if not all(addrs.values()):
                 raise EmbreeError("the compiled user-geometry callbacks are incomplete")
             _engine = lib  # keeps the code mapped for the process
             _addresses.update(addrs)
         return dict(_addresses)
+
+
+def _llvmlite_version() -> str:
+    import llvmlite
+
+    return llvmlite.__version__
 
 
 def _optimize(llvm: Any, mod: Any, tm: Any) -> None:

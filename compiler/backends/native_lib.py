@@ -7,9 +7,10 @@ the same path as every other kernel: an object file from the target machine, lin
 died inside MCJIT in 2 of 3 full-suite runs, in a process that also loads many linked
 kernel libraries.)  The library is cached under ``$RDSL_CACHE_DIR/native``, keyed by a
 hash of the optimized LLVM IR and the target machine, so a scene loaded again links
-nothing; or (:func:`load_native_from`) by a hash of the IR before optimization, LLVM's
-version and the machine, so that a process finding the library optimizes nothing either
-(the Embree callbacks' O3 took 0.13 s of every scene load with a sphere or a disk)."""
+nothing; or (:func:`load_native_from`) by a hash of what decides that IR, LLVM's version,
+the machine and the compiler's code, so that a process finding the library builds and
+optimizes no IR either (the Embree callbacks' took 0.2 s of every scene load with a sphere
+or a disk)."""
 
 from __future__ import annotations
 
@@ -39,10 +40,11 @@ def load_native(mod: Any, tm: Any, machine: str, what: str) -> ctypes.CDLL:
 def load_native_from(source: str, machine: str, what: str,
                      build: Callable[[], tuple[Any, Any]]) -> ctypes.CDLL:
     """:func:`load_native` of ``build()`` (the optimized ModuleRef and its target machine),
-    keyed by ``source``, the text of the IR ``build`` parses and optimizes, which decides
-    its result together with LLVM's version, ``machine`` (triple, CPU and features) and the
-    compiler's code (how ``build`` optimizes): ``build`` runs only when the library is in
-    neither this process nor the cache."""
+    keyed by ``source``, which with LLVM's version, ``machine`` (triple, CPU and features)
+    and the compiler's code (how ``build`` generates and optimizes) decides what ``build``
+    returns (the text of the IR it parses, or a name for IR the compiler's code alone
+    generates): ``build`` runs only when the library is in neither this process nor the
+    cache."""
     import llvmlite.binding as llvm
 
     from ...core.cachedir import compiler_fingerprint

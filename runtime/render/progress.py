@@ -13,9 +13,10 @@ from __future__ import annotations
 
 import sys
 import time
-from typing import TextIO
+from typing import TYPE_CHECKING, TextIO
 
-from tqdm import tqdm
+if TYPE_CHECKING:
+    from tqdm import tqdm
 
 __all__ = ["Progress", "format_duration", "format_rate", "summary_line"]
 
@@ -79,6 +80,8 @@ class Progress:
         if enabled and interactive:
             # a whole total prints as "32/64", not "32.0/64.0"
             whole = int(self.total) if self.total.is_integer() else self.total
+            from tqdm import tqdm  # only when a bar draws: 35 ms of every import
+
             self._bar = tqdm(total=whole, desc=label, unit=unit, file=self.stream,
                              mininterval=min_interval)
         if self.plain:

@@ -16,7 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ...dsl.parser import F32_OVERFLOW
+from ...compiler.ir import F32_OVERFLOW
 from . import transform as xf
 from .mesh_attributes import ply_attributes
 

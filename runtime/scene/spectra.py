@@ -18,9 +18,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ...compiler.ir import Loc
+from ...compiler.ir import F32_OVERFLOW, Loc
 from ...core import spectral
-from ...dsl.parser import F32_OVERFLOW
 from .errors import scene_error
 
 CIE_MIN = 360.0
