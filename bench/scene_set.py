@@ -20,7 +20,7 @@ DRJIT_LIBLLVM_PATH), else `scalar_rgb`; the table says which.
 command with an empty kernel cache, against a fresh Python process that imports Mitsuba 3,
 loads the scene and renders 1 spp with an empty Dr.Jit kernel cache (HOME in a fresh folder).
 Then a new scene of a user who rendered before (only the parsed stdlib kept), and an edited
-scene: a copy with one colour changed (its last ``<rgb>``, times 0.9), rendered with the
+scene: a copy with one material colour changed (times 0.9), rendered with the
 kernel cache the runs before it left, by rdsl and by Mitsuba 3 (whose Dr.Jit cache then
 holds its kernels too).  rdsl's Python modules are byte-compiled first, as pip does when it
 installs a package (``PYTHONDONTWRITEBYTECODE`` would otherwise make every run compile them).
@@ -168,12 +168,15 @@ def cold_ttfp(path: Path, threads: int, variant: str) -> dict[str, float]:
 
 
 def edited_copy(path: Path, folder: Path) -> Path:
-    """``path`` with its last ``<rgb ... value="r, g, b"/>`` times 0.9, written into
-    ``folder`` beside links to the other files of its folder (meshes, textures)."""
+    """``path`` with the last ``<rgb ... value="r, g, b"/>`` of its BSDFs (a material's
+    colour, which the specialized build folds) times 0.9, written into ``folder`` beside
+    links to the other files of its folder (meshes, textures)."""
     import re
 
     text = path.read_text()
-    m = list(re.finditer(r'(<rgb\b[^>]*\bvalue=")([^"]+)(")', text))[-1]
+    m = [m for b in re.finditer(r"<bsdf\b.*?</bsdf>", text, re.S)
+         for m in re.finditer(r'(<rgb\b[^>]*\bvalue=")([^"]+)(")', text[:b.end()])
+         if m.start() >= b.start()][-1]
     value = ", ".join(f"{0.9 * float(v):.6g}" for v in m[2].replace(",", " ").split())
     folder.mkdir()
     for f in path.parent.iterdir():

@@ -17,7 +17,7 @@ from ..core.gcpause import gc_paused
 from ..core.scene_spec import SceneSpec
 from .build import Build
 from .diagnostics import CompileError, InternalError  # noqa: F401 (InternalError re-exported)
-from .ir import Module
+from .ir import Module, clone_function
 from .passes import Pass
 from .passes.ad_forward import AdForward
 from .passes.ad_reverse import AdReverse
@@ -125,6 +125,43 @@ def frontend(source_or_path: str | Path, filename: str | None = None,
         raise CompileError("program too deeply nested") from e
 
 
+# The IR of a program as the frontend lowered it (before any pass), kept by compile_kernels
+# for programs with `table` functions (their `.read`s carry attrs["table"]): a generic
+# build's tables are filled after its compile from the plugins' IR (runtime/tables.py),
+# which would otherwise be lowered a second time (0.2-0.5 s).  The last two programs.
+_LOWERED: dict[tuple[str, str | None, tuple[str, ...]], Module] = {}
+
+
+def _lowered_key(source_or_path: str | Path, filename: str | None,
+                 search_paths: Sequence[Path] | None) -> tuple[str, str | None, tuple[str, ...]]:
+    text = Path(source_or_path).read_text() if is_path(source_or_path) else str(source_or_path)
+    return text, filename, tuple(str(p) for p in search_paths or ())
+
+
+def lowered(source_or_path: str | Path, filename: str | None = None,
+            search_paths: Sequence[Path] | None = None) -> Module:
+    """The frontend's IR of the program (:func:`frontend`), shared: the caller must not
+    change it (clone what it rewrites); the one a compile in this process lowered, if it
+    kept it."""
+    key = _lowered_key(source_or_path, filename, search_paths)
+    module = _LOWERED.get(key)
+    if module is None:
+        module = frontend(source_or_path, filename, list(search_paths or []) or None)
+    return module
+
+
+def _keep_lowered(module: Module, source_or_path: str | Path, filename: str | None,
+                  search_paths: Sequence[Path] | None) -> None:
+    if not any("table" in f.attrs for f in module.functions.values()):
+        return
+    copy = Module(structs=dict(module.structs))
+    for f in module.functions.values():
+        copy.add(clone_function(f))
+    while len(_LOWERED) >= 2:
+        _LOWERED.pop(next(iter(_LOWERED)))
+    _LOWERED[_lowered_key(source_or_path, filename, search_paths)] = copy
+
+
 def verify_mode() -> str:
     """How a compile for a render verifies its IR: after lowering and at the end, or after
     every pass when ``RDSL_VERIFY_EACH=1`` (to find which pass broke an invariant)."""
@@ -143,6 +180,7 @@ def compile_kernels(source_or_path: str | Path, build: Build, filename: str | No
     others, and what only they call, are not compiled."""
     with gc_paused():
         module = frontend(source_or_path, filename, search_paths)
+        _keep_lowered(module, source_or_path, filename, search_paths)
         if exports is not None:
             keep_exports(module, exports)
         run_passes(module, pipeline(build, scene, report), verify=verify_mode())

@@ -90,12 +90,13 @@ def _samples_file(mod: Any, entry: dict[str, Any], inst: Any) -> Path | None:
 
 
 def _lowered(source: str | Path, filename: str | None, search_paths: tuple[str, ...]) -> Any:
-    """The IR of ``source`` straight from the frontend (kept per source in this process)."""
-    from ..compiler.driver import frontend
+    """The IR of ``source`` straight from the frontend (kept per source in this process; the
+    one the compile of its generic kernels lowered, if that ran in this process)."""
+    from ..compiler.driver import lowered
 
     text = source.read_text() if isinstance(source, Path) else str(source)
     key = (text, filename, search_paths)
     with _lock:
         if key not in _ir:
-            _ir[key] = frontend(source, filename, [Path(p) for p in search_paths])
+            _ir[key] = lowered(source, filename, [Path(p) for p in search_paths])
         return _ir[key]
