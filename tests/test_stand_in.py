@@ -1,6 +1,7 @@
 """The generic build standing in for a small render's specialized kernels
-(runtime/render/stand_in.py): a scene whose own kernels are not cached renders with the
-generic ones, which every scene of the same structure shares, so that editing a value
+(runtime/render/stand_in.py): a scene of a new structure renders with its own quick kernels
+while the generic ones are built in the background; a scene of a structure rendered before
+whose own kernels are not cached renders with those generic ones, so that editing a value
 compiles nothing; the image is the specialized build's to float rounding; the scene's own
 kernels replace the stand-in from its second render on, and a large render compiles them at
 once."""
@@ -14,7 +15,7 @@ pytest.importorskip("rdsl.runtime.embree")
 
 from _scenes import CBOX, edited_copy
 from rdsl.cli import main
-from rdsl.runtime.render import renderer
+from rdsl.runtime.render import renderer, stand_in
 from rdsl.runtime.render.renderer import load_scene
 from rdsl.runtime.render.stand_in import is_stand_in
 from rdsl.runtime.render.tier_up import RENDERS_BEFORE_TIER_UP
@@ -46,27 +47,40 @@ def specialized_image(path, spp=2, seed=5, **defaults):
     return s.render(spp=spp, seed=seed)
 
 
+def first_render(path, spp=2, seed=5, **defaults):
+    """Render a scene of a structure not seen before: its own quick kernels render, and the
+    generic ones are built beside them (waited for here); the scene and its image."""
+    stand_in._building = None
+    s = load_scene(path, **defaults)
+    img = s.render(spp=spp, seed=seed)
+    assert not is_stand_in(s._module) and not reads_prm(s._module)
+    job = stand_in._building
+    assert job is not None, "the generic kernels are built in the background"
+    assert job.proc.wait() == 0
+    return s, img
+
+
 def test_an_edited_value_renders_from_the_cache(cache):
-    a = load_scene(CBOX, res=16)
-    img_a = a.render(spp=2, seed=5)
-    assert is_stand_in(a._module) and not a.from_cache and a.prm.size > 1
+    _, img_a = first_render(CBOX, res=16)
     (cache / "edit").mkdir()
     path = edited_copy(CBOX, cache / "edit", RED, "0.2, 0.6, 0.3")
     b = load_scene(path, res=16)
     img_b = b.render(spp=2, seed=5)
-    assert is_stand_in(b._module) and b.from_cache  # the same structure: no compile
-    for path_, img in ((CBOX, img_a), (path, img_b)):
-        np.testing.assert_allclose(img, specialized_image(path_, res=16), rtol=0, atol=1e-5)
+    assert is_stand_in(b._module) and b.from_cache and b.prm.size > 1  # no compile
+    np.testing.assert_allclose(img_b, specialized_image(path, res=16), rtol=0, atol=1e-5)
     assert not np.allclose(img_a, img_b, atol=1e-3)  # the edited value did reach the kernel
-    # an integrator's depth is a value too; the film's size is in the kernel's text
-    for defaults, cached in (({"max_depth": 3}, True), ({"res": 24}, False)):
-        c = load_scene(CBOX, **{"res": 16, **defaults})
-        c.render(spp=1)
-        assert is_stand_in(c._module) and c.from_cache == cached, defaults
+    # an integrator's depth is a value too
+    c = load_scene(CBOX, res=16, max_depth=3)
+    c.render(spp=1)
+    assert is_stand_in(c._module) and c.from_cache
+    # the film's size is in the kernel's text: a new structure
+    first_render(CBOX, spp=1, res=24)
 
 
 def test_the_scenes_own_kernels_replace_the_stand_in(cache):
-    s = load_scene(CBOX, res=16)
+    first_render(CBOX, res=16)
+    (cache / "edit").mkdir()
+    s = load_scene(edited_copy(CBOX, cache / "edit", RED, "0.2, 0.6, 0.3"), res=16)
     first = s.render(spp=2, seed=1)
     assert is_stand_in(s._module)
     for _ in range(RENDERS_BEFORE_TIER_UP - 1):
@@ -77,6 +91,19 @@ def test_the_scenes_own_kernels_replace_the_stand_in(cache):
     last = s.render(spp=2, seed=1)
     assert not is_stand_in(s._module) and not reads_prm(s._module)
     np.testing.assert_allclose(last, first, rtol=0, atol=1e-5)
+
+
+def test_one_background_build_at_a_time_and_none_on_one_core(cache, monkeypatch):
+    stand_in._building = None
+    load_scene(CBOX, res=16).render(spp=1)
+    job = stand_in._building
+    load_scene(CBOX, res=20).render(spp=1)  # another structure while the first build runs
+    assert stand_in._building is job or job.done()
+    assert job.proc.wait() == 0
+    stand_in._building = None
+    monkeypatch.setattr(stand_in.os, "cpu_count", lambda: 1)
+    load_scene(CBOX, res=12).render(spp=1)
+    assert stand_in._building is None
 
 
 def test_a_large_render_and_a_cached_scene_use_their_own_kernels(cache, monkeypatch):
@@ -94,27 +121,31 @@ def test_a_large_render_and_a_cached_scene_use_their_own_kernels(cache, monkeypa
 
 @pytest.mark.parametrize("why", ["generic already", "switched off", "integer too large"])
 def test_no_stand_in(cache, monkeypatch, why):
+    first_render(CBOX, spp=1, res=8)  # the generic kernels are cached
     path = CBOX
     if why == "switched off":
         monkeypatch.setenv("RDSL_GENERIC_FIRST", "0")
     if why == "integer too large":  # max_depth 2**25: only the specialized build holds it
-        path = edited_copy(CBOX, cache, 'name="max_depth" value="$max_depth"',
+        (cache / "big").mkdir()
+        path = edited_copy(CBOX, cache / "big", 'name="max_depth" value="$max_depth"',
                            'name="max_depth" value="33554432"')
+    stand_in._building = None
     s = load_scene(path, res=8, specialize=why != "generic already")
     s.render(spp=1)
-    assert not is_stand_in(s._module)
+    assert not is_stand_in(s._module) and stand_in._building is None
     assert reads_prm(s._module) == (why == "generic already")
 
 
 def test_cli_says_which_build_rendered(cache, capsys):
+    first_render(CBOX, spp=1, res=16)
+    (cache / "edit").mkdir()
+    path = edited_copy(CBOX, cache / "edit", RED, "0.2, 0.6, 0.3")
     out = cache / "cbox.exr"
-    argv = ["render", str(CBOX), "-D", "res=16", "--spp", "1", "-o", str(out), "--quiet"]
+    argv = ["render", str(path), "-D", "res=16", "--spp", "1", "-o", str(out), "--quiet"]
     assert main([*argv, "--report"]) == 0
     text = capsys.readouterr().out
     assert "generic build standing in (quick tier: LLVM O0; parameters read from PRM" in text
-    assert "(generic build standing in)" in text.splitlines()[-1]
-    assert main(argv) == 0  # the second command: the generic kernels from the cache
-    assert "kernels from cache (generic build standing in)" in capsys.readouterr().out
+    assert "kernels from cache (generic build standing in)" in text.splitlines()[-1]
 
 
 ROUGH = """<scene version="3.0.0">
@@ -143,9 +174,7 @@ def test_tables_of_an_edited_scene_come_from_the_cache(cache, monkeypatch):
         path.write_text(ROUGH.replace("ALPHA", alpha).replace("COLOUR", colour))
         return path
 
-    first = load_scene(write("0.3", "0.5, 0.2, 0.1"))
-    first.render(spp=2, seed=3)
-    assert is_stand_in(first._module) and first.prm.size > 1
+    first_render(write("0.3", "0.5, 0.2, 0.1"), seed=3)
     frontend = tables._lowered
     for alpha, colour, reads in (("0.3", "0.1, 0.6, 0.2", False), ("0.1", "0.1, 0.6, 0.2", True)):
         calls = []

@@ -9,16 +9,19 @@ folds in both builds), so it is shared by every scene of that structure and, onc
 in the kernel cache for all of them.
 
 So a small render (the quick tier's size, ``renderer.QUICK_SAMPLES``) of a scene whose own
-kernels are in the cache in neither tier renders with the generic build's kernels: loaded
-from the cache when a scene of the same structure was rendered before (the full tier if
-there, else the quick tier), else compiled at the quick tier, which costs what the
-specialized quick tier costs and serves every later edit of the scene's values.  From the
-scene's second render on, its specialized kernels are built in the background and replace
-the stand-in when ready (runtime/render/tier_up.py), as the quick tier is replaced; a large
-render compiles them at once.  The generic build renders the specialized build's image to
-float rounding (within 1e-5 absolute; tests/test_generic_build.py and
-tests/test_stand_in.py), not bit for bit: functions the specialized build evaluates at
-compile time on constants (``evaluate``) run as compiled code here.
+kernels are in the cache in neither tier renders with the generic build's kernels when
+those are cached (a scene of the same structure was rendered before: the full tier if
+there, else the quick tier).  When they are not, the scene's own quick-tier kernels are
+compiled as before (the generic build's are 5-50% larger: its first image would come
+later), and the generic ones are built at the same time in another process, on the
+machine's second core, for the edits to come (:func:`start_generic_build`; it goes on after
+a one-off ``rdsl render`` ends, as runtime/render/tier_up.py's builds do).  From a
+stand-in scene's second render on, its own kernels are built in the background and replace
+the stand-in when ready, as the quick tier is replaced; a large render compiles them at
+once.  The generic build renders the specialized build's image to float rounding (within
+1e-5 absolute; tests/test_generic_build.py and tests/test_stand_in.py), not bit for bit:
+functions the specialized build evaluates at compile time on constants (``evaluate``) run
+as compiled code here.
 
 Not a stand-in: a scene loaded generic already, a differentiated twin, a scene whose
 integers the generic build cannot hold (2**24 or more), a target other than the LLVM CPU
@@ -69,13 +72,41 @@ def generic_stand_in(scene: Scene, small: bool, src: str, kw: dict[str, Any]) ->
     except CompileError:  # an integer only the specialized build holds
         return None
     options = dict(kw, scene=generic)
-    mod = jit(src, quick=not jit_cached(src, **options), **options)
+    full = jit_cached(src, **options)
+    if not (full or jit_cached(src, quick=True, **options)):
+        # nothing cached: the scene's own quick kernels come sooner (the generic build's are
+        # 5-50% larger), and the generic ones are built beside them for the edits to come
+        start_generic_build(src, options, scene.scene_spec)
+        return None
+    mod = jit(src, quick=not full, **options)  # from the cache
     mod.stand_in = True
     from ..tables import fill_tables
 
     scene.prm = fill_tables(mod, scene.scene_spec, prm, src, kw["filename"],
                             scene.search_paths)
     return mod
+
+
+def start_generic_build(src: str, options: dict[str, Any], values: Any) -> Any | None:
+    """Build the generic kernels of ``jit(src, **options)`` at the quick tier in another
+    process (runtime/render/tier_up.py's :class:`TierUp`, which goes on after this process
+    ends and fills the kernel cache), and their tables for the values of ``values`` (the
+    scene's SceneSpec: an edit of another value finds them in the cache), unless this process has one such build running
+    already or the machine has one core (the build would take the render's).  Returns the
+    job, or None; never raises (it is an optimization)."""
+    global _building
+    from .tier_up import TierUp
+
+    if (os.cpu_count() or 1) < 2 or (_building is not None and not _building.done()):
+        return None
+    try:
+        _building = TierUp(src, options, quick=True, tables_for=values)
+    except Exception:  # noqa: BLE001 - no process to spare: the next edit compiles
+        _building = None
+    return _building
+
+
+_building: Any = None  # this process's background build of generic kernels, if any
 
 
 def tier_words(mod: Any) -> str:

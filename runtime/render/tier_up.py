@@ -38,9 +38,12 @@ class TierUp:
     """One background build of a scene's full-tier kernels: ``jit(source, **options)``
     (``quick``: of its quick tier; runtime/render/prebuild.py's adjoint kernels)."""
 
-    def __init__(self, source: str, options: dict[str, Any], quick: bool = False) -> None:
+    def __init__(self, source: str, options: dict[str, Any], quick: bool = False,
+                 tables_for: Any = None) -> None:
         self.source, self.options, self.quick = source, options, quick
-        job = pickle.dumps((source, options, quick))  # a scene that cannot be sent starts none
+        # tables_for: a scene (its SceneSpec) whose values the generic kernels' tables are
+        # then computed for, into the cache (runtime/tables.py)
+        job = pickle.dumps((source, options, quick, tables_for))  # or none, if unpicklable
         # its messages go to a file: a pipe could fill up, or break when this process ends
         self.messages = tempfile.TemporaryFile()
         self.proc = subprocess.Popen(
@@ -92,14 +95,21 @@ class TierUp:
 
 
 def _worker() -> int:
-    """The background process: read ``(source, options, quick)``, build that tier into the
-    kernel cache.  SIGTERM raises SystemExit, so jit's cleanup removes a partial entry."""
+    """The background process: read ``(source, options, quick, tables_for)``, build that
+    tier into the kernel cache (and the tables of a generic build for ``tables_for``).  SIGTERM raises SystemExit, so jit's cleanup removes a partial entry."""
     signal.signal(signal.SIGTERM, lambda *_: sys.exit(143))
-    source, options, quick = pickle.load(sys.stdin.buffer)
+    source, options, quick, tables_for = pickle.load(sys.stdin.buffer)
     from ..api import jit
 
     try:
-        jit(source, quick=quick, **options)
+        mod = jit(source, quick=quick, **options)
+        if tables_for is not None:
+            import numpy as np
+
+            from ..tables import fill_tables
+
+            fill_tables(mod, tables_for, np.zeros(1, np.float32), source,
+                        options.get("filename"), options.get("search_paths") or ())
     except Exception as e:  # one line for the warning: what failed, where
         lines = str(e).strip().splitlines()
         print(f"{type(e).__name__}: {lines[0] if lines else ''}", file=sys.stderr)
