@@ -37,7 +37,7 @@ from ..scene import load_scene_description
 from ..scene.reads import recording
 from ..scene.samplers import requested_samples, sample_count
 from ..tables import fill_tables
-from .stand_in import after_compile, generic_stand_in, is_stand_in
+from .stand_in import after_render, generic_stand_in, is_stand_in
 from .bsdfs import (
     dispersion_warnings,
     polarization_warnings,
@@ -203,7 +203,6 @@ class Scene:
                 jit(src, quick=quick and not jit_cached(src, **kw), **kw)
         except NoRayTracer:  # one line: what is missing, not the integrator's source
             raise CompileError(_no_ray_tracer(self.path, self.build.target.name)) from None
-        after_compile(self)  # the generic kernels for later edits, in the background
         if not self.specialize:  # and so do the tables the plugins compute per scene
             self.prm = self.with_tables(self.prm, mod)
         self._module = mod
@@ -501,6 +500,7 @@ class Scene:
                     bar.finish()
                     raise RenderCancelled(f"cancelled after {done} of {spp} spp")
         bar.finish()
+        after_render(self)  # a new structure's generic kernels, for later edits: stand_in.py
         acc = acc.get() if hasattr(acc, "get") else acc
         if self._prm_set and not self.derivative:  # for backward: each pixel's total weight
             c = film["channels"]

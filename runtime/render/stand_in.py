@@ -13,7 +13,8 @@ kernels are in the cache in neither tier renders with the generic build's kernel
 those are cached (a scene of the same structure was rendered before: the full tier if
 there, else the quick tier).  When they are not, the scene's own quick-tier kernels are
 compiled as before (the generic build's are 5-50% larger: its first image would come
-later), and then the generic ones are built in another process, for the edits to come
+later), and once it has rendered the generic ones are built in another process, for the
+edits to come
 (:func:`start_generic_build`, 2-3 s; it goes on after a one-off ``rdsl render`` ends, as
 runtime/render/tier_up.py's builds do).  From a
 stand-in scene's second render on, its own kernels are built in the background and replace
@@ -75,7 +76,7 @@ def generic_stand_in(scene: Scene, small: bool, src: str, kw: dict[str, Any]) ->
     full = jit_cached(src, **options)
     if not (full or jit_cached(src, quick=True, **options)):
         # nothing cached: the scene's own quick kernels come sooner (the generic build's are
-        # 5-50% larger); the generic ones are built once they are, for the edits to come
+        # 5-50% larger); the generic ones are built after its render, for the edits to come
         scene._generic_build = (src, options, scene.scene_spec)
         return None
     mod = jit(src, quick=not full, **options)  # from the cache
@@ -87,10 +88,10 @@ def generic_stand_in(scene: Scene, small: bool, src: str, kw: dict[str, Any]) ->
     return mod
 
 
-def after_compile(scene: Scene) -> None:
+def after_render(scene: Scene) -> None:
     """Start the background build of the generic kernels that :func:`generic_stand_in`
-    left to be built after the scene's own (started only then: on 2 cores it slowed the
-    scene's own compile by up to 20%)."""
+    left to be built after the scene's first render (on the second core beside the compile,
+    it slowed that compile by up to 20%, and it would take a core from the render)."""
     pending = getattr(scene, "_generic_build", None)
     if pending is not None:
         scene._generic_build = None
