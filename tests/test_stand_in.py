@@ -188,3 +188,17 @@ def test_tables_of_an_edited_scene_come_from_the_cache(cache, monkeypatch):
         assert bool(calls) == reads, (alpha, colour)
         np.testing.assert_allclose(img, specialized_image(path, spp=2, seed=3),
                                    rtol=0, atol=1e-5)
+
+
+def test_assigning_a_parameter_after_the_first_render_waits_for_the_generic_build(cache):
+    """scene.params[...] = ... makes the scene generic: it loads the kernels the background
+    build made rather than compiling them beside it."""
+    stand_in._building = None
+    s = load_scene(CBOX, res=16)
+    s.render(spp=1)
+    job = stand_in._building
+    assert job is not None
+    s.params["red.reflectance.value"] = np.array([0.3, 0.2, 0.1], np.float32)
+    img = s.render(spp=2, seed=4)
+    assert job.done() and s.from_cache and reads_prm(s._module)
+    assert np.isfinite(img).all() and img.mean() > 0

@@ -37,7 +37,7 @@ from ..scene import load_scene_description
 from ..scene.reads import recording
 from ..scene.samplers import requested_samples, sample_count
 from ..tables import fill_tables
-from .stand_in import after_render, generic_stand_in, is_stand_in
+from .stand_in import after_render, generic_stand_in, is_stand_in, wait_for_generic_build
 from .bsdfs import (
     dispersion_warnings,
     polarization_warnings,
@@ -198,6 +198,7 @@ class Scene:
             return self._module
         src, kw = self._jit_inputs = self._jit_args()
         wait_for_speculated(self, quick)  # a background build of these kernels (prebuild.py)
+        wait_for_generic_build(src, kw, quick)  # or stand_in.py's, of the generic ones
         try:  # a small render not cached yet: the generic build's kernels (stand_in.py)
             mod = generic_stand_in(self, small, src, kw) or \
                 jit(src, quick=quick and not jit_cached(src, **kw), **kw)

@@ -120,6 +120,21 @@ def start_generic_build(src: str, options: dict[str, Any], values: Any) -> Any |
 _building: Any = None  # this process's background build of generic kernels, if any
 
 
+def wait_for_generic_build(src: str, kw: dict[str, Any], quick: bool) -> None:
+    """Wait for this process's background build of generic kernels if it builds what
+    ``jit(src, quick=quick, **kw)`` asks for (a scene whose parameters were assigned after
+    its first render compiles those very kernels), rather than compile them beside it."""
+    job = _building
+    if job is None or not quick or job.done() or job.source != src:
+        return
+    try:
+        same = job.options == kw
+    except Exception:  # noqa: BLE001 - options that do not compare: not the same build
+        same = False
+    if same:
+        job.proc.wait()
+
+
 def tier_words(mod: Any) -> str:
     """What ``rdsl render --report`` says about the tier of ``mod``."""
     level = "quick tier: LLVM O0" if getattr(mod, "quick", False) else "full tier: LLVM O3"
