@@ -289,7 +289,8 @@ class Kernel:
 
     # -- calling -------------------------------------------------------------------------
     def __call__(self, *args: Any, mask: Any = None, threads: int | None = None,
-                 out: Any = None, wait: bool = True, **kwargs: Any) -> Any:
+                 out: Any = None, wait: bool = True, ranges: Any = None,
+                 **kwargs: Any) -> Any:
         """Run the kernel over arrays.
 
         Positional arguments are the source-level varying params and the buffers, in order
@@ -319,7 +320,13 @@ class Kernel:
 
         ``wait=False`` returns a :class:`Pending` at once, while the thread pool runs the
         call: calls queued together share the pool, so one's last tasks overlap the next's
-        first (the arrays passed in must not change until ``result()``)."""
+        first (the arrays passed in must not change until ``result()``).
+
+        ``ranges``: ``[(lo, hi), ...]`` runs exactly those element ranges, each as one task
+        on one thread (in order on this thread with ``threads=1``), instead of chunks the
+        call chooses: for a caller whose ranges own state of their own (``backward`` gives
+        each range gradient rows that no other task writes).  The arguments are converted
+        once for all of them.  CPU targets only."""
         if threads is not None and (isinstance(threads, bool) or
                                     not isinstance(threads, numbers.Integral) or threads < 1):
             raise self._err(f"`threads` expects a number of threads, 1 or more (or None: "
@@ -353,7 +360,8 @@ class Kernel:
             flat += [None, 0]
         else:
             flat += [mask_arr.ctypes.data, mask_arr.strides[0]]
-        futures = self._run(n, flat, threads)
+        futures = self._run(n, flat, threads) if ranges is None else \
+            self._run_ranges(n, ranges, flat, threads)
         pending = Pending(futures, (keep, mask_arr, c_vals),
                           lambda: out if out is not None else self._results(out_arrays, n))
         return pending if not wait else pending.result()
@@ -506,6 +514,22 @@ class Kernel:
         bounds = [(b, min(b + chunk, n)) for b in range(0, n, chunk)]
         pool = _pool(threads)
         return [pool.submit(self._range, b, e, *flat) for b, e in bounds]
+
+    def _run_ranges(self, n: int, ranges: Any, flat: list[Any],
+                    threads: int | None) -> list[Future]:
+        """Run ``ranges`` of [0, n), each as one task: on this thread with ``threads=1``,
+        else on the pool (their futures are returned, not waited for)."""
+        bounds = [(int(lo), int(hi)) for lo, hi in ranges]
+        for lo, hi in bounds:
+            if not 0 <= lo <= hi <= n:
+                raise self._err(f"`ranges` has {(lo, hi)}, outside the call's {n} elements")
+        threads = (os.cpu_count() or 1) if threads is None else threads
+        if threads == 1:
+            for lo, hi in bounds:
+                self._range(lo, hi, *flat)
+            return []
+        pool = _pool(min(threads, MAX_THREADS_PER_CORE * (os.cpu_count() or 1)))
+        return [pool.submit(self._range, lo, hi, *flat) for lo, hi in bounds if hi > lo]
 
     def _out_leaves(self, result: Any, n: int) -> list[np.ndarray]:
         """The arrays of ``result`` (shaped as ``_results`` builds it, any strides) for the

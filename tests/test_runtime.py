@@ -417,3 +417,26 @@ def test_a_pending_call_holds_its_buffers():
     del pending
     gc.collect()
     assert held() is None
+
+
+def test_a_call_over_given_ranges():
+    """``ranges=`` runs exactly those element ranges, each as one task (backward's parts own
+    gradient rows): each range's results as a call over the whole array gives them, the
+    elements outside every range untouched in ``out``; a range past the call's elements is
+    a clear error naming it."""
+    m = rdsl.jit("fn scaled(i: Int, B: [Float]) -> Float { return B[0] * Float(i); }")
+    i = np.arange(10_000, dtype=np.int32)
+    buf = np.array([1.5], np.float32)
+    whole = m.scaled(i, buf)
+    ranges = [(0, 4096), (4096, 4099), (5000, 10_000)]
+    for threads in (1, 2):
+        out = np.full(i.size, -1.0, np.float32)
+        m.scaled(i, buf, out=out, threads=threads, ranges=ranges)
+        inside = np.zeros(i.size, bool)
+        for lo, hi in ranges:
+            inside[lo:hi] = True
+        np.testing.assert_array_equal(out[inside], whole[inside])
+        assert (out[~inside] == -1.0).all()
+    with pytest.raises(ValueError, match=r"`ranges` has \(9000, 10001\), outside the call's "
+                                         r"10000 elements"):
+        m.scaled(i, buf, ranges=[(0, 10), (9000, 10_001)])

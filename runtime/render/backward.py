@@ -24,7 +24,7 @@ of ``render_forward``'s derivative image with ``d_img`` (tests/test_ad_reverse.p
 from __future__ import annotations
 
 import os
-from functools import lru_cache, partial
+from functools import lru_cache
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -33,7 +33,6 @@ from ...compiler.build import elimination_threshold
 from ...compiler.diagnostics import CompileError
 from ...compiler.passes.ad_checkpoint import OVERFLOW, TAPE_LANES
 from ...core.scene_spec import Slot
-from ..kernel import _pool
 from ..scene.samplers import requested_samples, sample_count
 from .differentiable import Texels, _lookup, ad_twin, adjoint_seeds, integrator_names
 from .film import film_reach, film_uniforms
@@ -80,9 +79,16 @@ def _check(scene: Scene, d_img: Any, params: list[str]) -> tuple[np.ndarray, dic
 
 LANES = TAPE_LANES  # the widest SIMD packet: lanes of one packet add gradients into rows of
 # their own (array position mod LANES), each part of the adjoint pass into LANES rows (_Parts)
-PARTS_PER_THREAD = 4
-WEIGHT_BATCH = 1 << 16  # samples per batch of the film-weight kernels (10 floats each
-# with a gaussian filter: 2.6 MB)
+GUIDED = 2  # a part of the adjoint pass is 1 / (GUIDED x threads) of what is left, so
+# the last parts are short (with 4 equal parts per thread, a 128 x 128 pass at 16 spp ended
+# on one core for 11 ms of its 100)
+MIN_PART = 512  # samples (0.4 ms here)
+PARTS_PER_THREAD_TEXELS = 4  # with texel gradients, whose rows are a texture's size each
+BATCH = 1 << 20  # samples per batch of the adjoint pass (24 bytes each, the arrays of one
+# batch's rows and indices; a batch ends with a barrier, waiting for its last part)
+WEIGHT_BATCH = 1 << 18  # samples per batch of the film-weight kernels (10 floats each
+# with a gaussian filter: 10 MB; with 1 << 16, a 128 x 128 pass at 16 spp made 8 calls of
+# tasks so short that one core ran most of them while the other woke)
 TAPE = 16  # bounces whose carried state the adjoint kernel checkpoints per lane (the
 # rest it recomputes from the last checkpoint: compiler/passes/ad_reverse.py)
 
@@ -134,8 +140,6 @@ def backward(scene: Scene, d_img: Any, params: list[str], spp: int | None = None
              eliminate: bool | int = False, tape: int = TAPE) -> dict[str, np.ndarray]:
     """d loss / d parameter for each name of ``params``, given d loss / d image (``tape``:
     bounces checkpointed per lane, 0 to recompute each bounce's state from the start)."""
-    from .renderer import BATCH_SAMPLES
-
     d, chosen = _check(scene, d_img, params)
     spp, seed = requested_samples(spp, seed, scene.spp, scene.seed)
     spp = sample_count(scene.desc.sensor.sampler, spp)
@@ -152,11 +156,12 @@ def backward(scene: Scene, d_img: Any, params: list[str], spp: int | None = None
     prm = twin.prm = twin.with_tables(np.array(scene.prm, np.float32), mod)
     film = film_uniforms(scene.desc.sensor.film, 1, channels=1)
     cells = film["grid_w"] * film["grid_h"]
-    batch = max(1, min(spp, BATCH_SAMPLES // max(cells, 1)))
+    batch = max(1, min(spp, BATCH // max(cells, 1)))
     kernel = next(k for k in mod.manifest["kernels"] if k["name"] == "render_sample_loss")
     names = [p["name"] for p in kernel["params"]]
+    sizes = sorted({cells * min(batch, spp - done) for done in range(0, spp, batch)})
     parts = _Parts(prm, scene.buffers.T, any(isinstance(c, Texels) for c in chosen.values()),
-                   threads)
+                   threads, sizes)
     floats = next((p.get("tape_floats", 0) for p in kernel["params"]
                    if p["name"] == "ad_tape"), 0)
     tape_rows = np.zeros(max(1, parts.parts * LANES * floats), np.float32)  # per lane
@@ -176,9 +181,9 @@ def backward(scene: Scene, d_img: Any, params: list[str], spp: int | None = None
                    "ad_row_T": parts.rows(n, scene.buffers.T.size)
                    if parts.texels else np.zeros(n, np.int32)}
         uniform["BATCH"] = batch_row(done, spp, seed)
-        args = [(varying[x], True) if x in varying else (uniform[x], False)
-                if x in uniform else (_seed(x, ones[:n]), True) for x in names]
-        parts.run(partial(_adjoint_part, mod["render_sample_loss"], args), n)
+        parts.run(mod["render_sample_loss"], [varying[x] if x in varying else uniform[x]
+                                              if x in uniform else _seed(x, ones[:n])
+                                              for x in names], n)
     if overflow is not None and (overflow != -1).any():  # the tape did not cover: again,
         scene._tape_overflowed = True  # with a kernel that replays (and from now on)
         return backward(scene, d_img, params, spp, seed, threads, eliminate, tape)
@@ -209,29 +214,25 @@ def _seed(name: str, ones: np.ndarray) -> np.ndarray:
     return ones
 
 
-def _adjoint_part(kernel, args: list, lo: int, hi: int) -> None:
-    """The adjoint kernel over samples [lo, hi) of a batch (``args``: its arguments and
-    whether each is varying: those are sliced, the buffers not)."""
-    kernel(*[x[lo:hi] if varying else x for x, varying in args], threads=1)
-
-
 class _Parts:
-    """The adjoint pass split into parts of whole packets, ``PARTS_PER_THREAD`` per thread
-    (so a slow thread holds up little), each with ``LANES`` rows of its own in each gradient
-    buffer: lane k of a packet adds into row k of its part, so no two lanes running at once
-    add into one element (no atomics), and the buffers stay small (parts x LANES rows, not
-    one per sample).  Without texel parameters ``gT`` is one row nobody reads (the adjoint
-    kernel writes it anyway)."""
+    """The adjoint pass split into parts of whole packets, each with ``LANES`` rows of its
+    own in each gradient buffer: lane k of a packet adds into row k of its part, so no two
+    lanes running at once add into one element (no atomics), and the buffers stay small
+    (parts x LANES rows, not one per sample).  The parts shrink towards the end of a batch
+    (:func:`_bounds`), so that the last one to finish keeps the other cores waiting
+    briefly; with texel gradients, whose rows are a texture each, there are fewer.
+    Without texel parameters ``gT`` is one row nobody reads (the adjoint kernel writes it
+    anyway)."""
 
     def __init__(self, prm: np.ndarray, T: np.ndarray, texels: bool,
-                 threads: int | None) -> None:
+                 threads: int | None, sizes: list[int]) -> None:
         self.threads = max(1, int(threads or os.cpu_count() or 1))
-        self.parts = 1 if self.threads == 1 else self.threads * PARTS_PER_THREAD
+        self.texels = texels
+        self.parts = max(len(_bounds(self.threads, texels, n)) for n in sizes)
         rows = self.parts * LANES
         if rows * max(T.size if texels else 0, prm.size) >= 2 ** 31:
             raise ValueError(f"texel gradients of {T.size} floats in {rows} rows exceed "
                              "32-bit indices; use fewer threads")
-        self.texels = texels
         self.gPRM = np.zeros(rows * prm.size, np.float32)
         self.gT = np.zeros(rows * T.size if texels else T.size, np.float32)
 
@@ -240,18 +241,13 @@ class _Parts:
         ``interleaved`` (the tape's: compiler/passes/ad_checkpoint.py) lane k of a part's
         block starts at ``k`` and its value j is ``TAPE_LANES`` further on each time.
         (Read-only: the same arrays serve every pass of the same shape.)"""
-        return _rows(self.parts, n, size, interleaved)
+        return _rows(self.threads, self.texels, n, size, interleaved)
 
-    def run(self, call, n: int) -> None:
-        """``call(lo, hi)`` over the parts of [0, n), on ``threads`` threads (the kernels'
-        long-lived pool: each part calls its kernel with ``threads=1``, on the pool's
-        thread, so no part waits for another's task)."""
-        if self.parts == 1:
-            call(0, n)
-            return
-        pool = _pool(self.threads)
-        for f in [pool.submit(call, lo, hi) for lo, hi in _bounds(self.parts, n)]:
-            f.result()
+    def run(self, kernel, args: list, n: int) -> None:
+        """``kernel`` over a batch of ``n`` samples, one task per part on ``threads``
+        threads (the kernels' long-lived pool): one call, so its arguments are converted
+        once, not once per part (0.4 ms each here)."""
+        kernel(*args, threads=self.threads, ranges=_bounds(self.threads, self.texels, n))
 
     def gradient(self, chosen: Slot | Texels) -> np.ndarray:
         if isinstance(chosen, Texels):
@@ -262,18 +258,31 @@ class _Parts:
         return total[chosen.offset:chosen.offset + chosen.size].astype(np.float32)
 
 
-def _bounds(parts: int, n: int) -> list[tuple[int, int]]:
-    """[lo, hi) of each of ``parts`` parts of [0, n), of whole packets."""
-    per = -(-n // parts)  # ceil
-    step = -(-per // LANES) * LANES
-    return [(lo, min(lo + step, n)) for lo in range(0, n, step)]
+def _bounds(threads: int, texels: bool, n: int) -> list[tuple[int, int]]:
+    """[lo, hi) of each part of [0, n), of whole packets: all of it on one thread; with
+    texel gradients ``PARTS_PER_THREAD_TEXELS`` equal parts per thread; else parts of a
+    ``GUIDED``-th of what is left each (at least ``MIN_PART`` samples), so that the last
+    parts are short (about 20 parts for 2 threads and 262k samples)."""
+    if threads == 1:
+        return [(0, n)]
+    if texels:
+        per = -(-n // (threads * PARTS_PER_THREAD_TEXELS))
+        step = -(-per // LANES) * LANES
+        return [(lo, min(lo + step, n)) for lo in range(0, n, step)]
+    out, lo = [], 0
+    while lo < n:
+        step = max(MIN_PART, -(-(n - lo) // (GUIDED * threads)))
+        step = -(-step // LANES) * LANES
+        out.append((lo, min(lo + step, n)))
+        lo += step
+    return out
 
 
 @lru_cache(maxsize=32)
-def _rows(parts: int, n: int, size: int, interleaved: bool) -> np.ndarray:
+def _rows(threads: int, texels: bool, n: int, size: int, interleaved: bool) -> np.ndarray:
     """:meth:`_Parts.rows` (an optimization loop asks for the same ones every iteration)."""
     rows = np.empty(n, np.int32)
-    for p, (lo, hi) in enumerate(_bounds(parts, n)):
+    for p, (lo, hi) in enumerate(_bounds(threads, texels, n)):
         lane = np.arange(hi - lo) % LANES
         rows[lo:hi] = p * LANES * size + (lane if interleaved else lane * size)
     rows.flags.writeable = False

@@ -10,6 +10,8 @@ called from the kernel), shading, light sampling and the film's reconstruction f
 
 from __future__ import annotations
 
+from collections import deque
+
 import hashlib
 import os
 import time
@@ -447,8 +449,9 @@ class Scene:
                threads: int | None = None, progress: bool = False,
                cancel: Callable[[], bool] | None = None) -> np.ndarray:
         """The image at ``spp`` samples per pixel.  ``cancel`` is asked after each batch
-        of samples (none is running then): once it answers True the render stops with
-        :class:`RenderCancelled` (rdsl render --watch drops a render an edit made stale)."""
+        of samples has reached the film: once it answers True the render stops with
+        :class:`RenderCancelled`, once the batch queued behind it has ended (rdsl render
+        --watch drops a render an edit made stale)."""
         spp, seed = requested_samples(spp, seed, self.spp, self.seed)
         spp = sample_count(self.desc.sensor.sampler, spp)
         mod = self._tiered(self.compile(quick=self.quick_fits(spp)))
@@ -467,39 +470,41 @@ class Scene:
         pixels = np.arange(film["crop_w"] * film["crop_h"], dtype=np.int32)
         self.nonfinite = 0
         bar = Progress(spp, label="rendering", unit="spp", enabled=progress)
-        # batch k renders while the film takes batch k - 1 (their tasks share the thread
-        # pool, so neither waits for the other's last tasks); each batch's output block is
-        # reused two batches later, so no batch faults in fresh pages
+        # two batches are in flight: batch k + 1 renders while the film takes batch k
+        # (their tasks share the thread pool, so neither waits for the other's last
+        # tasks), and batch k + 2 is queued as soon as the film has taken batch k, into
+        # batch k's output block (so no batch faults in fresh pages; the last, smaller
+        # batch gets a block of its own)
         outs: list[Any] = [None, None]
         j = np.arange(cells * batch, dtype=np.int32)  # a batch's sample indices
-        waiting = None  # (samples, n) of the rendered batch the film has not taken yet
-        done = k = 0
-        while done < spp or waiting is not None:
-            job = None
-            if done < spp:
-                n = min(batch, spp - done)
-                if n != batch:  # the last, smaller batch
-                    outs = [None, None]
-                rs = batch_row(done, spp, seed)
-                job = mod["render_sample"](j[:cells * n], rs, *scene_args,
-                                           *self._param_args(mod), threads=threads,
-                                           out=outs[k % 2], wait=False)
-            if waiting is not None:
-                prev, m = waiting
-                ns = len(prev["bad"])
-                mod["film_pass"](pixels, np.array([m, ns], np.int32), _film_samples(prev, ns),
-                                 acc, threads=threads)
-                self.nonfinite += int(np.count_nonzero(prev["bad"]))
-                bar.update(done)
-            waiting = None
-            if job is not None:
-                outs[k % 2] = job.result()
-                waiting = (outs[k % 2], n)
-                done += n
+        inflight: deque[tuple[Any, int, int]] = deque()  # (pending call, n, block slot)
+        done = queued = k = 0
+        while queued < spp or inflight:
+            while queued < spp and len(inflight) < 2:
+                n = min(batch, spp - queued)
+                job = mod["render_sample"](j[:cells * n], batch_row(queued, spp, seed),
+                                           *scene_args, *self._param_args(mod),
+                                           threads=threads,
+                                           out=outs[k % 2] if n == batch else None,
+                                           wait=False)
+                inflight.append((job, n, k % 2))
+                queued += n
                 k += 1
-                if cancel is not None and cancel():
-                    bar.finish()
-                    raise RenderCancelled(f"cancelled after {done} of {spp} spp")
+            job, n, slot = inflight.popleft()
+            samples = job.result()
+            if n == batch:
+                outs[slot] = samples
+            ns = len(samples["bad"])
+            mod["film_pass"](pixels, np.array([n, ns], np.int32), _film_samples(samples, ns),
+                             acc, threads=threads)
+            self.nonfinite += int(np.count_nonzero(samples["bad"]))
+            done += n
+            bar.update(done)
+            if cancel is not None and cancel():
+                for job, _n, _slot in inflight:  # let the queued batches end first
+                    job.result()
+                bar.finish()
+                raise RenderCancelled(f"cancelled after {done} of {spp} spp")
         bar.finish()
         after_render(self)  # a new structure's generic kernels, for later edits: stand_in.py
         acc = acc.get() if hasattr(acc, "get") else acc
