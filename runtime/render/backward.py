@@ -35,7 +35,7 @@ from ...compiler.passes.ad_checkpoint import OVERFLOW, TAPE_LANES
 from ...core.scene_spec import Slot
 from ..scene.samplers import requested_samples, sample_count
 from .differentiable import Texels, _lookup, ad_twin, adjoint_seeds, integrator_names
-from .film import film_reach, film_uniforms
+from .film import film_reach, film_uniforms, gather_in_groups
 from .kernel_source import SCENE_BUFFERS, batch_row
 
 if TYPE_CHECKING:
@@ -130,7 +130,7 @@ def _film_weights(scene: Scene, mod: Any, spp: int, seed: int,
         ns = cells * m
         S = block[:planes * ns]
         mod["film_weight_sample"](j[:ns], batch_row(done, spp, seed, ns), S, threads=threads)
-        mod["film_weight_pass"](pixels, np.array([m, ns], np.int32), S, acc, threads=threads)
+        gather_in_groups(mod["film_weight_pass"], pixels, m, ns, S, acc, threads)
     return acc
 
 

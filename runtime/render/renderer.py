@@ -49,7 +49,7 @@ from .bvh import scene_bvh
 from .differentiable import SceneParams, gradient, render_forward
 from .emitters import KINDS as EMITTER_KINDS
 from .film import (COLOUR_CHANNELS, colour_image, develop, film_format, film_uniforms,
-                   new_accumulator)
+                   gather_in_groups, new_accumulator)
 from .flatten import SceneBuffers, flatten
 from .integrators import integrator_instances, integrator_plan
 from .kernel_source import batch_row, film_channels, kernel_source, scene_plugins
@@ -495,8 +495,8 @@ class Scene:
             if n == batch:
                 outs[slot] = samples
             ns = len(samples["bad"])
-            mod["film_pass"](pixels, np.array([n, ns], np.int32), _film_samples(samples, ns),
-                             acc, threads=threads)
+            gather_in_groups(mod["film_pass"], pixels, n, ns, _film_samples(samples, ns), acc,
+                             threads)
             self.nonfinite += int(np.count_nonzero(samples["bad"]))
             done += n
             bar.update(done)
