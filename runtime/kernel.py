@@ -56,6 +56,12 @@ def _shape_desc(tj: dict[str, Any]) -> str:
 _POOLS: dict[int, ThreadPoolExecutor] = {}
 
 
+def _thread_count(threads: int | None) -> int:
+    """A call's threads: one per core by default, ``MAX_THREADS_PER_CORE`` at most."""
+    cores = os.cpu_count() or 1
+    return min(cores if threads is None else threads, MAX_THREADS_PER_CORE * cores)
+
+
 def _pool(threads: int) -> ThreadPoolExecutor:
     """A long-lived pool per thread count: starting threads for every call costs more than
     a small kernel call itself."""
@@ -323,10 +329,9 @@ class Kernel:
         first (the arrays passed in must not change until ``result()``).
 
         ``ranges``: ``[(lo, hi), ...]`` runs exactly those element ranges, each as one task
-        on one thread (in order on this thread with ``threads=1``), instead of chunks the
-        call chooses: for a caller whose ranges own state of their own (``backward`` gives
-        each range gradient rows that no other task writes).  The arguments are converted
-        once for all of them.  CPU targets only."""
+        on one thread (in order here with ``threads=1``), not chunks the call chooses: for
+        ranges that own state (``backward`` gives each gradient rows no other task writes).
+        The arguments are converted once for all of them.  CPU targets only."""
         if threads is not None and (isinstance(threads, bool) or
                                     not isinstance(threads, numbers.Integral) or threads < 1):
             raise self._err(f"`threads` expects a number of threads, 1 or more (or None: "
@@ -498,10 +503,7 @@ class Kernel:
         for)."""
         if n <= 0:
             return []
-        threads = (os.cpu_count() or 1) if threads is None else threads
-        # a few threads per core at most: `threads=10**6` would start a thread for every
-        # few vectors of work (and its pool would keep them all)
-        threads = min(threads, MAX_THREADS_PER_CORE * (os.cpu_count() or 1))
+        threads = _thread_count(threads)
         if threads == 1 or n < 2 * MIN_CHUNK:
             self._fn(n, *flat)
             return []
@@ -517,18 +519,16 @@ class Kernel:
 
     def _run_ranges(self, n: int, ranges: Any, flat: list[Any],
                     threads: int | None) -> list[Future]:
-        """Run ``ranges`` of [0, n), each as one task: on this thread with ``threads=1``,
-        else on the pool (their futures are returned, not waited for)."""
+        """Each of ``ranges`` as one task (here with ``threads=1``); the pool's futures."""
         bounds = [(int(lo), int(hi)) for lo, hi in ranges]
-        for lo, hi in bounds:
-            if not 0 <= lo <= hi <= n:
-                raise self._err(f"`ranges` has {(lo, hi)}, outside the call's {n} elements")
-        threads = (os.cpu_count() or 1) if threads is None else threads
-        if threads == 1:
+        bad = next((b for b in bounds if not 0 <= b[0] <= b[1] <= n), None)
+        if bad is not None:
+            raise self._err(f"`ranges` has {bad}, outside the call's {n} elements")
+        if _thread_count(threads) == 1:
             for lo, hi in bounds:
                 self._range(lo, hi, *flat)
             return []
-        pool = _pool(min(threads, MAX_THREADS_PER_CORE * (os.cpu_count() or 1)))
+        pool = _pool(_thread_count(threads))
         return [pool.submit(self._range, lo, hi, *flat) for lo, hi in bounds if hi > lo]
 
     def _out_leaves(self, result: Any, n: int) -> list[np.ndarray]:

@@ -10,12 +10,11 @@ called from the kernel), shading, light sampling and the film's reconstruction f
 
 from __future__ import annotations
 
-from collections import deque
-
 import hashlib
 import os
 import time
 import warnings
+from collections import deque
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any

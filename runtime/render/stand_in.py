@@ -132,7 +132,7 @@ def wait_for_generic_build(src: str, kw: dict[str, Any], quick: bool) -> None:
     except Exception:  # noqa: BLE001 - options that do not compare: not the same build
         same = False
     if same:
-        job.proc.wait()
+        job.finish()
 
 
 def tier_words(mod: Any) -> str:
