@@ -32,28 +32,36 @@ class _Liveness:
         self.slots: set[tuple[Instr, int]] = set()
         self.seen: set[Value] = set()
         self.work: list[Value] = []
-        self.index(fn.body, None)
-        for ins in fn.walk():
-            if ins.op in EFFECT_OPS:
+        roots: list[Instr] = []  # the instructions with effects, in program order
+        self.index(fn.body, None, roots)
+        for ins in roots:
+            self.mark(ins)
+        work, producer = self.work, self.producer
+        while work:
+            v = work.pop()
+            if v in producer:
+                ins, k = producer[v]
                 self.mark(ins)
-        while self.work:
-            v = self.work.pop()
-            if v in self.producer:
-                ins, k = self.producer[v]
-                self.mark(ins)
-                if ins.op in (Op.IF, Op.LOOP):
+                if ins.op is Op.IF or ins.op is Op.LOOP:
                     self.mark_slot(ins, k)
 
-    def index(self, block: Block, owner: Instr | None) -> None:
+    def index(self, block: Block, owner: Instr | None, roots: list[Instr]) -> None:
+        producer, parent = self.producer, self.parent
         if owner is not None and owner.op is Op.LOOP:
             for k, a in enumerate(block.args):
-                self.producer[a] = (owner, k)
+                producer[a] = (owner, k)
         for ins in block.instrs:
-            self.parent[ins] = owner
-            for k, r in enumerate(ins.results):
-                self.producer[r] = (ins, k)
+            parent[ins] = owner
+            results = ins.results
+            if len(results) == 1:
+                producer[results[0]] = (ins, 0)
+            else:
+                for k, r in enumerate(results):
+                    producer[r] = (ins, k)
+            if ins.op in EFFECT_OPS:
+                roots.append(ins)
             for r in ins.regions:
-                self.index(r, ins)
+                self.index(r, ins, roots)
 
     def push(self, v: Value) -> None:
         if v not in self.seen:
@@ -61,16 +69,20 @@ class _Liveness:
             self.work.append(v)
 
     def mark(self, ins: Instr | None) -> None:
-        while ins is not None and ins not in self.live:
-            self.live.add(ins)
-            if ins.op is Op.IF:
+        live, seen, work, parent = self.live, self.seen, self.work, self.parent
+        while ins is not None and ins not in live:
+            live.add(ins)
+            op = ins.op
+            if op is Op.IF:
                 self.push(ins.operands[0])
-            elif ins.op is Op.LOOP:
+            elif op is Op.LOOP:
                 self.push(ins.regions[0].instrs[-1].operands[0])
-            elif ins.op is not Op.YIELD:
+            elif op is not Op.YIELD:
                 for v in ins.operands:
-                    self.push(v)
-            ins = self.parent[ins]
+                    if v not in seen:
+                        seen.add(v)
+                        work.append(v)
+            ins = parent[ins]
 
     def mark_slot(self, ins: Instr, k: int) -> None:
         if (ins, k) in self.slots:

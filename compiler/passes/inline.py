@@ -93,6 +93,7 @@ class Inline(Pass):
         An ``if`` whose condition is a constant by then is replaced by its taken region."""
         out: list[Instr] = []
         work: deque[Instr | tuple[Instr, Instr]] = deque(block.instrs)
+        get = mapping.get
         while work:
             ins = work.popleft()
             if isinstance(ins, tuple):  # a folded `if` or a moved call: its results are
@@ -101,16 +102,19 @@ class Inline(Pass):
                     mapping[r] = mapping.get(v, v)
                 continue
             if mapping:
-                ins.operands = [mapping.get(v, v) for v in ins.operands]
-            taken = _taken(ins, ins.operands)
-            if taken is not None:
-                work.appendleft((ins, taken.instrs[-1]))
-                work.extendleft(reversed(taken.instrs[:-1]))
-                continue
+                ins.operands = [get(v, v) for v in ins.operands]
+            op = ins.op
+            if op is Op.IF:
+                taken = _taken(ins, ins.operands)
+                if taken is not None:
+                    work.appendleft((ins, taken.instrs[-1]))
+                    work.extendleft(reversed(taken.instrs[:-1]))
+                    continue
             for region in ins.regions:
                 self._inline_block(region, mapping)
-            if ins.op is not Op.CALL:
-                _fold(ins)
+            if op is not Op.CALL:
+                if op in _FOLDABLE:
+                    _fold(ins)
                 out.append(ins)
                 continue
             callee = self.module.functions.get(ins.attrs["callee"])
@@ -270,7 +274,7 @@ class _Folder:
         get = mapping.get
         for ins in instrs:
             operands = [get(v, v) for v in ins.operands]
-            taken = _taken(ins, operands)
+            taken = _taken(ins, operands) if ins.op is Op.IF else None
             if taken is not None:  # the taken region, in place; the results: its yield's
                 self.copy(taken.instrs[:-1], out)
                 for r, v in zip(ins.results, taken.instrs[-1].operands):

@@ -51,6 +51,13 @@ MAX_ITERATIONS = 50
 def _attr_key(v: Any) -> Any:
     """A hashable key that tells apart everything that behaves differently (True vs 1,
     0.0 vs -0.0, NaN payloads)."""
+    tv = type(v)  # the common cases first: a float, an int, a one-entry dict
+    if tv is float:
+        return ("f", struct.pack("<d", v))
+    if tv is int:
+        return ("i", v)
+    if tv is dict:
+        return ("d", tuple([(k, _attr_key(v[k])) for k in sorted(v)]))
     if isinstance(v, (bool, np.bool_)):
         return ("b", bool(v))
     if isinstance(v, (int, np.integer)):
@@ -97,13 +104,15 @@ class _Maybe:
     def __init__(self, s: _Simplifier, loop: Instr) -> None:
         self.s = s
         self.init = dict(zip(loop.regions[0].args, loop.operands))
-        self.inside: dict[Value, tuple[Instr, int]] = {}
+        self.inside: dict[Value, Instr] = {}  # a value defined in the loop: its instruction
+        inside = self.inside
         stack = [loop.regions[0]]
         while stack:
             for ins in stack.pop().instrs:
-                for k, r in enumerate(ins.results):
-                    self.inside[r] = (ins, k)
-                stack.extend(ins.regions)
+                for r in ins.results:
+                    inside[r] = ins
+                if ins.regions:
+                    stack.extend(ins.regions)
         self.memo: dict[tuple[Value, Any], bool] = {}
 
     def could_be(self, v: Value, want: Any, depth: int = 0) -> bool:
@@ -120,7 +129,7 @@ class _Maybe:
         """The constant ``v`` is in the first iteration, if it is one already."""
         v = self.init.get(v, v)
         if v in self.inside:
-            ins = self.inside[v][0]
+            ins = self.inside[v]
             return ins.attrs.get("value") if ins.op is Op.CONST else None
         return self.s.consts.get(self.s.find(v))
 
@@ -130,7 +139,7 @@ class _Maybe:
         if v not in self.inside:  # from outside the loop
             c = self.s.consts.get(self.s.find(v))
             return c is not None and (want is None or c == want)
-        ins, k = self.inside[v]
+        ins = self.inside[v]
         op = ins.op
         if op is Op.CONST:
             return want is None or "value" not in ins.attrs or ins.attrs["value"] == want
@@ -149,6 +158,7 @@ class _Maybe:
             got = _CMP_EVAL[op](*(self.known(x) for x in ins.operands))
             return want is None or bool(got) == want
         if op is Op.IF:
+            k = ins.results.index(v)
             ys = [r.instrs[-1].operands[k] for r in ins.regions]
             cond = self.known(ins.operands[0])
             if cond is not None and len(ys) == 2:
@@ -159,6 +169,14 @@ class _Maybe:
         if op in PURE_OPS:
             return all(self.could_be(x, None, depth) for x in ins.operands)
         return True
+
+
+def _all_known(cs: list[Any]) -> bool:
+    """Whether no entry of ``cs`` is None (a loop: ``None in cs`` would compare arrays)."""
+    for c in cs:
+        if c is None:
+            return False
+    return True
 
 
 _NO_ATTRS = _attr_key({})  # most instructions have none: no call, the same key
@@ -190,10 +208,16 @@ class _Simplifier:
         self.scopes.append([])
         work = deque(block.instrs)
         out: list[Instr] = []
+        repl = self.repl
         while work:
             ins = work.popleft()
-            ins.operands = [self.find(v) for v in ins.operands]
-            if ins.op is Op.IF:
+            if repl:
+                ins.operands = [self.find(v) if v in repl else v for v in ins.operands]
+            op = ins.op
+            if op in PURE_OPS:
+                if len(ins.results) == 1 and not self.pure(ins):
+                    continue
+            elif op is Op.IF:
                 c = self.consts.get(ins.operands[0])
                 if c is not None:
                     taken = ins.regions[0 if c else 1]
@@ -205,7 +229,7 @@ class _Simplifier:
                 for r in ins.regions:
                     self.block(r)
                 out.extend(self.same_on_both_sides(ins))
-            elif ins.op is Op.LOOP:
+            elif op is Op.LOOP:
                 peeled = None if self.speculating else self.peel(ins)
                 if peeled is not None:
                     out.extend(peeled)
@@ -213,8 +237,6 @@ class _Simplifier:
                 self.block(ins.regions[0])
                 if not self.speculating:
                     self.invariant_slots(ins)
-            elif ins.op in PURE_OPS and len(ins.results) == 1 and not self.pure(ins):
-                continue
             out.append(ins)
         block.instrs = out
         for key in self.scopes.pop():
@@ -272,22 +294,25 @@ class _Simplifier:
 
     def pure(self, ins: Instr) -> bool:
         """Simplify a pure single-result instruction; False if it was replaced."""
+        result = ins.results[0]
         r = self.rewrite(ins)
         if r is not None:
-            self.repl[ins.result] = r
+            self.repl[result] = r
             self.changed = True
             return False
-        key = _cse_key(ins)
+        attrs = ins.attrs
+        key = (ins.op, tuple(ins.operands), _attr_key(attrs) if attrs else _NO_ATTRS,
+               result.type)  # _cse_key
         known = self.seen.get(key)
         if known is not None:
-            self.repl[ins.result] = known
+            self.repl[result] = known
             self.changed = True
             return False
-        self.seen[key] = ins.result
+        self.seen[key] = result
         self.scopes[-1].append(key)
-        if ins.op is Op.CONST and "trait" not in ins.attrs and "value" in ins.attrs:
+        if ins.op is Op.CONST and "value" in attrs and "trait" not in attrs:
             try:
-                self.consts[ins.result] = coerce(ins.attrs["value"], ins.result.type)
+                self.consts[result] = coerce(attrs["value"], result.type)
             except (InterpError, TypeError, ValueError, OverflowError):
                 pass
         return True
@@ -328,18 +353,24 @@ class _Simplifier:
     def rewrite(self, ins: Instr) -> Value | None:
         """Return a value equal to ``ins``'s result, or None (possibly after rewriting
         ``ins`` in place, e.g. into a constant)."""
-        op, ops, t = ins.op, ins.operands, ins.result.type
+        op = ins.op
         if op is Op.CONST:
             return None
-        cs = [self.consts.get(v) for v in ops]
-        if ops and _is_scalar(t) and all(c is not None for c in cs) \
-                and all(v.type.lanes == 1 for v in ops):
+        ops, t = ins.operands, ins.results[0].type
+        consts = self.consts
+        cs = [consts.get(v) for v in ops]
+        scalar = isinstance(t, ScalarType) and t.lanes == 1  # _is_scalar(t)
+        if scalar and ops and _all_known(cs) and all(v.type.lanes == 1 for v in ops):
             try:
                 val = eval_pure(op, t, [v.type for v in ops], cs, ins.attrs)
             except (InterpError, IndexError, KeyError, TypeError):
                 val = None
             if val is not None and self.make_const(ins, val):
                 return None
+        if op in _ALGEBRA:  # the common case first: arithmetic and comparisons
+            if not scalar or not ops or ops[0].type != t and op not in _CMP:
+                return None
+            return _ALGEBRA[op](self, ins, ops, cs, t)
         if op is Op.SELECT:
             if cs[0] is not None:
                 return ops[1] if cs[0] else ops[2]
@@ -352,9 +383,7 @@ class _Simplifier:
             return ops[0] if ops[0].type == t else None
         if op is Op.EXTRACT:
             return self.extract(ins)
-        if not _is_scalar(t) or not ops or ops[0].type != t and op not in _CMP:
-            return None
-        return _ALGEBRA.get(op, _no_rule)(self, ins, ops, cs, t)
+        return None
 
     def extract(self, ins: Instr) -> Value | None:
         idx = ins.attrs.get("index")
@@ -381,10 +410,6 @@ class _Simplifier:
 # Algebraic identities (scalars only; every rule is exact under IEEE-754 and wrapping ints)
 
 _CMP = {Op.EQ, Op.NE, Op.LT, Op.LE, Op.GT, Op.GE}
-
-
-def _no_rule(s: _Simplifier, ins: Instr, ops: list, cs: list, t: ScalarType) -> Value | None:
-    return None
 
 
 def _is(c: Any, t: ScalarType, x: float) -> bool:
