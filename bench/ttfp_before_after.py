@@ -21,7 +21,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from scene_set import _timed, all_scenes, scene_defaults
+from scene_set import _background_builds, _timed, all_scenes, scene_defaults
 
 
 def cold(path: Path, pythonpath: str | None) -> tuple[float, float]:
@@ -30,8 +30,12 @@ def cold(path: Path, pythonpath: str | None) -> tuple[float, float]:
         if pythonpath:
             env["PYTHONPATH"] = pythonpath
         d = [f"-Dres={v}" for v in scene_defaults(path).values()]
-        return _timed([sys.executable, "-m", "rdsl.cli", "render", str(path), "--spp", "1",
-                       "--quiet", "-o", str(Path(tmp) / "a.exr"), *d], env)
+        timed = _timed([sys.executable, "-m", "rdsl.cli", "render", str(path), "--spp", "1",
+                        "--quiet", "-o", str(Path(tmp) / "a.exr"), *d], env)
+        # the generic build a new structure starts after its first image goes on after the
+        # command: it must neither load the next run nor write into a folder being removed
+        _background_builds()
+        return timed
 
 
 def main() -> None:

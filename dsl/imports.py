@@ -12,6 +12,7 @@ from pathlib import Path
 
 from ..compiler.diagnostics import read_source_file
 from . import ast as A
+from . import parse_ahead
 from .parser import parse
 from .program import ModuleInfo
 from .types import err
@@ -98,8 +99,13 @@ def load_program(source: str, filename: str, search_paths: list[Path] | None = N
                  path: Path | None = None) -> list[ModuleInfo]:
     """The prelude, the main file (text ``source``) and its imports, dependencies first."""
     loader = Loader([Path(p) for p in (search_paths or [])])
-    for p in prelude():
-        loader.load_path(p).prelude = True
-    key = str(path.resolve()) if path is not None else f"<main>{filename}"
-    loader.load_text(source, filename, key, is_main=True)
+    helper = parse_ahead.start(source, filename, loader.search_paths, prelude(), STDLIB)
+    try:
+        for p in prelude():
+            loader.load_path(p).prelude = True
+        key = str(path.resolve()) if path is not None else f"<main>{filename}"
+        loader.load_text(source, filename, key, is_main=True)
+    finally:
+        if helper is not None:
+            helper.stop()
     return loader.order

@@ -104,6 +104,47 @@ def parse(source: str, filename: str) -> A.Program:
     return program
 
 
+def is_cached(source: str, filename: str) -> bool:
+    """Whether ``parse(source, filename)`` would read its AST back rather than parse."""
+    key = _ast_key(source, filename)
+    return key in _ASTS or (cache_dir() / "ast" / f"{key}.pickle").is_file()
+
+
+def cache_writable() -> bool:
+    """Whether parsed ASTs can be kept on disk (the folder exists or can be made, and
+    is writable)."""
+    folder = cache_dir() / "ast"
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+    except OSError:
+        return False
+    return os.access(folder, os.W_OK)
+
+
+def warm_up() -> None:
+    """Load the parser (its tables, from lark's cache) now."""
+    _lark()
+
+
+def parse_for_cache(source: str, filename: str) -> tuple[str, bytes] | None:
+    """The cache key and pickled AST of ``source``, what :func:`parse` keeps on disk
+    (:func:`store` writes it), or None if it is there already or has a syntax error (left
+    to :func:`parse` to report; dsl/parse_ahead.py's helper calls this)."""
+    if is_cached(source, filename):
+        return None
+    try:
+        program = _parse(source, filename)
+        return _ast_key(source, filename), pickle.dumps(program,
+                                                        protocol=pickle.HIGHEST_PROTOCOL)
+    except Exception:  # noqa: BLE001 - reported by the loader's own parse
+        return None
+
+
+def store(key: str, blob: bytes) -> None:
+    """Keep a :func:`parse_for_cache` result on disk."""
+    _write_cached(key, blob)
+
+
 # Pickled ASTs by key, in this process; on disk under <cache>/ast/
 _ASTS: dict[str, bytes] = {}
 

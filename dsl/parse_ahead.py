@@ -1,0 +1,227 @@
+"""Parsing ahead on the other core: a cold compile parses its files in a forked helper too.
+
+A compile with an empty cache parses every file it imports (a scene's kernel: ~30 stdlib
+files, 0.8-1.3 s of lark in one process, the largest part of a cold first image after the
+passes).  :func:`start` looks ahead, without parsing, at what a program will load (the
+prelude, the main text and, depth first, the ``import`` lines of each file, found by a
+regular expression and looked up as the loader does), and if enough of it is not in the
+parse cache (``<cache>/ast/``) it forks a helper that parses those files in the *reverse*
+of the loader's order and writes each one's AST to the cache.  The loader goes on as
+before: :func:`rdsl.dsl.parser.parse` reads an entry the helper wrote instead of parsing,
+so the two meet in the middle, and at most the file each is working on is parsed twice.
+The result is the same AST (the cache holds what ``parse`` itself would store: the same
+key and the same pickle); only who parsed it differs.
+
+The guess can be wrong both ways (an import in a comment, a file not found): a file
+guessed wrongly is one the helper parses for nothing, a file missed is one the loader
+parses itself.  When the loader is done, :meth:`Helper.stop` ends the helper and collects
+it (it finishes an entry it is writing, a millisecond), so nothing of it outlives the
+compile; if the parent dies first, the helper stops after its file (it watches a pipe
+whose other end the parent holds).  It takes its stdin/stdout/stderr from ``/dev/null``
+(so that a caller reading the command's output sees its end when the command ends), and
+gives up after ``DEADLINE_S``.  Off with
+``RDSL_PARSE_AHEAD=0``, where ``os.fork`` is missing, with one CPU, or when the cache
+cannot be written.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import re
+import select
+from pathlib import Path
+
+ENV = "RDSL_PARSE_AHEAD"
+MIN_FILES = 4  # fewer files to parse than this: not worth a fork
+DEADLINE_S = 60  # the helper exits by then whatever happens (SIGALRM)
+STOP_WAIT_S = 0.5  # how long :meth:`Helper.stop` waits for it to end
+
+_IMPORT = re.compile(r"^[ \t]*import[ \t]+([A-Za-z_]\w*(?:[ \t]*\.[ \t]*[A-Za-z_]\w*)*)[ \t]*;",
+                     re.MULTILINE)
+
+
+class Helper:
+    """A forked parser; :meth:`stop` tells it to finish (it never blocks the caller)."""
+
+    def __init__(self, pid: int, fd: int) -> None:
+        self.pid, self.fd = pid, fd
+
+    def stop(self) -> None:
+        """End the helper now (it finishes an entry it is writing) and collect it, so
+        that nothing of it runs or writes after the compile: up to ``STOP_WAIT_S``, then
+        SIGKILL."""
+        import signal
+        import time
+
+        if self.fd < 0:
+            return
+        os.close(self.fd)
+        self.fd = -1
+        with contextlib.suppress(ProcessLookupError):
+            os.kill(self.pid, signal.SIGTERM)
+        deadline = time.monotonic() + STOP_WAIT_S
+        while True:
+            try:
+                done, _ = os.waitpid(self.pid, os.WNOHANG)
+            except ChildProcessError:
+                break
+            if done:
+                break
+            if time.monotonic() > deadline:  # stuck: it may leave a temporary file
+                with contextlib.suppress(ProcessLookupError):
+                    os.kill(self.pid, signal.SIGKILL)
+                with contextlib.suppress(ChildProcessError):
+                    os.waitpid(self.pid, 0)
+                break
+            time.sleep(0.001)
+        if self.pid in _children:
+            _children.remove(self.pid)
+
+
+_children: list[int] = []
+
+
+def _reap() -> None:
+    """Collect the helpers that have exited (no zombies left while the process runs)."""
+    for pid in list(_children):
+        try:
+            done, _ = os.waitpid(pid, os.WNOHANG)
+        except ChildProcessError:
+            done = pid
+        if done:
+            _children.remove(pid)
+
+
+def enabled() -> bool:
+    return (os.environ.get(ENV, "1") != "0" and hasattr(os, "fork")
+            and (os.cpu_count() or 1) > 1)
+
+
+def planned_files(source: str, filename: str, search_paths: list[Path],
+                  prelude: list[Path], stdlib: Path) -> list[tuple[str, str]]:
+    """``(text, filename)`` of each file the loader will probably parse, in its order (the
+    prelude, the main text, then depth first what each imports); never raises."""
+    out: list[tuple[str, str]] = []
+    seen: set[str] = set()
+
+    def visit(text: str, name: str, key: str) -> None:
+        if key in seen:
+            return
+        seen.add(key)
+        out.append((text, name))
+        importer_stdlib = _inside(name, stdlib)
+        for m in _IMPORT.finditer(text):
+            rel = Path(*re.split(r"[ \t]*\.[ \t]*", m.group(1))).with_suffix(".rdsl")
+            dirs = [] if name.startswith("<") else [Path(name).parent]
+            dirs += [] if importer_stdlib else search_paths
+            dirs.append(stdlib)
+            for d in dirs:
+                cand = d / rel
+                if cand.is_file():
+                    try:
+                        visit(cand.read_text(), str(cand), str(cand.resolve()))
+                    except (OSError, UnicodeDecodeError):
+                        pass
+                    break
+
+    for p in prelude:
+        try:
+            visit(p.read_text(), str(p), str(p.resolve()))
+        except (OSError, UnicodeDecodeError):
+            pass
+    visit(source, filename, f"<main>{filename}")
+    return out
+
+
+def _inside(name: str, folder: Path) -> bool:
+    if name.startswith("<"):
+        return False
+    try:
+        return Path(name).resolve().is_relative_to(folder.resolve())
+    except OSError:
+        return False
+
+
+def start(source: str, filename: str, search_paths: list[Path], prelude: list[Path],
+          stdlib: Path) -> Helper | None:
+    """Fork a helper for the files of this program that the parse cache lacks, if there
+    are at least ``MIN_FILES`` of them; None if not worth it or not possible."""
+    from . import parser
+
+    if not enabled():
+        return None
+    _reap()
+    try:
+        files = planned_files(source, filename, search_paths, prelude, stdlib)
+        todo = [(t, n) for t, n in files if not parser.is_cached(t, n)]
+        if len(todo) < MIN_FILES or not parser.cache_writable():
+            return None
+        parser.warm_up()  # lark's tables loaded before the fork: the helper starts parsing
+        r, w = os.pipe()
+    except (OSError, ValueError, RecursionError):
+        return None
+    try:
+        pid = os.fork()
+    except OSError:
+        os.close(r)
+        os.close(w)
+        return None
+    if pid == 0:  # the helper: never returns
+        try:
+            os.close(w)
+            _detach(r)
+            _help(r, reversed(todo))
+        finally:
+            os._exit(0)
+    os.close(r)
+    _children.append(pid)
+    return Helper(pid, w)
+
+
+def _help(fd: int, files) -> None:
+    """Parse ``files`` into the cache until done or told to stop: SIGTERM ends the helper
+    at once, unless it is writing an entry, which it finishes first (no half-written or
+    stray temporary file); a closed pipe (the parent gone) stops it between files."""
+    import signal
+
+    from . import parser
+
+    state = {"writing": False, "stop": False}
+
+    def on_term(signum: int, frame: object) -> None:
+        if not state["writing"]:
+            os._exit(0)
+        state["stop"] = True
+
+    signal.signal(signal.SIGTERM, on_term)
+    for text, name in files:
+        if _stopped(fd):
+            return
+        entry = parser.parse_for_cache(text, name)
+        if entry is not None:
+            state["writing"] = True
+            parser.store(*entry)
+            state["writing"] = False
+        if state["stop"]:
+            return
+
+
+def _detach(keep: int) -> None:
+    """The helper's standard streams from /dev/null, its other descriptors closed (a
+    pipe the caller reads to its end must not wait for the helper), and its deadline."""
+    import signal
+
+    signal.signal(signal.SIGALRM, signal.SIG_DFL)  # not a handler the caller set
+    signal.alarm(DEADLINE_S)  # SIGALRM's default action ends the process
+    null = os.open(os.devnull, os.O_RDWR)
+    for fd in (0, 1, 2):
+        os.dup2(null, fd)
+    os.closerange(3, keep)
+    os.closerange(keep + 1, 1 << 16)
+
+
+def _stopped(fd: int) -> bool:
+    """Whether the loader has finished (its end of the pipe closed: readable at EOF)."""
+    ready, _, _ = select.select([fd], [], [], 0)
+    return bool(ready)
