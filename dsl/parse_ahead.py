@@ -30,6 +30,7 @@ import contextlib
 import os
 import re
 import select
+import warnings
 from pathlib import Path
 
 ENV = "RDSL_PARSE_AHEAD"
@@ -162,7 +163,10 @@ def start(source: str, filename: str, search_paths: list[Path], prelude: list[Pa
     except (OSError, ValueError, RecursionError):
         return None
     try:
-        pid = os.fork()
+        with warnings.catch_warnings():  # Python 3.12+ warns of forking with threads; the
+            # helper only parses and writes files (no lock of another thread's is needed)
+            warnings.simplefilter("ignore", DeprecationWarning)
+            pid = os.fork()
     except OSError:
         os.close(r)
         os.close(w)
