@@ -50,13 +50,7 @@ class Loader:
 
     def _import(self, imp: A.Import, importer: str) -> None:
         rel = Path(*imp.path).with_suffix(".rdsl")
-        dirs: list[Path] = []
-        if not importer.startswith("<"):
-            dirs.append(Path(importer).parent)
-        if not in_stdlib(importer):
-            dirs += self.search_paths
-        dirs.append(STDLIB)
-        for d in dirs:
+        for d in import_dirs(importer, self.search_paths):
             cand = d / rel
             if cand.is_file():
                 key = str(cand.resolve())
@@ -76,6 +70,15 @@ class Loader:
                                                  if self.search_paths else "")
         raise err(f"cannot find module `{name}` (looked for `{rel.as_posix()}` {where} and "
                   "in the stdlib)", imp.loc)
+
+
+def import_dirs(importer: str, search_paths: list[Path]) -> list[Path]:
+    """Where an import of ``importer`` is looked up, in order: next to it, in the search
+    paths (not for a stdlib file), in the stdlib."""
+    dirs = [] if importer.startswith("<") else [Path(importer).parent]
+    if not in_stdlib(importer):
+        dirs += search_paths
+    return [*dirs, STDLIB]
 
 
 def in_stdlib(filename: str) -> bool:
@@ -99,7 +102,8 @@ def load_program(source: str, filename: str, search_paths: list[Path] | None = N
                  path: Path | None = None) -> list[ModuleInfo]:
     """The prelude, the main file (text ``source``) and its imports, dependencies first."""
     loader = Loader([Path(p) for p in (search_paths or [])])
-    helper = parse_ahead.start(source, filename, loader.search_paths, prelude(), STDLIB)
+    helper = parse_ahead.start(source, filename, prelude(),
+                               lambda importer: import_dirs(importer, loader.search_paths))
     try:
         for p in prelude():
             loader.load_path(p).prelude = True

@@ -31,6 +31,7 @@ import os
 import re
 import select
 import warnings
+from collections.abc import Callable
 from pathlib import Path
 
 ENV = "RDSL_PARSE_AHEAD"
@@ -43,7 +44,7 @@ _IMPORT = re.compile(r"^[ \t]*import[ \t]+([A-Za-z_]\w*(?:[ \t]*\.[ \t]*[A-Za-z_
 
 
 class Helper:
-    """A forked parser; :meth:`stop` tells it to finish (it never blocks the caller)."""
+    """A forked parser; :meth:`stop` ends it."""
 
     def __init__(self, pid: int, fd: int) -> None:
         self.pid, self.fd = pid, fd
@@ -99,10 +100,11 @@ def enabled() -> bool:
             and (os.cpu_count() or 1) > 1)
 
 
-def planned_files(source: str, filename: str, search_paths: list[Path],
-                  prelude: list[Path], stdlib: Path) -> list[tuple[str, str]]:
+def planned_files(source: str, filename: str, prelude: list[Path],
+                  import_dirs: Callable[[str], list[Path]]) -> list[tuple[str, str]]:
     """``(text, filename)`` of each file the loader will probably parse, in its order (the
-    prelude, the main text, then depth first what each imports); never raises."""
+    prelude, the main text, then depth first what each imports, looked up in
+    ``import_dirs(importer)`` as the loader does); never raises."""
     out: list[tuple[str, str]] = []
     seen: set[str] = set()
 
@@ -111,41 +113,26 @@ def planned_files(source: str, filename: str, search_paths: list[Path],
             return
         seen.add(key)
         out.append((text, name))
-        importer_stdlib = _inside(name, stdlib)
         for m in _IMPORT.finditer(text):
             rel = Path(*re.split(r"[ \t]*\.[ \t]*", m.group(1))).with_suffix(".rdsl")
-            dirs = [] if name.startswith("<") else [Path(name).parent]
-            dirs += [] if importer_stdlib else search_paths
-            dirs.append(stdlib)
-            for d in dirs:
-                cand = d / rel
-                if cand.is_file():
-                    try:
-                        visit(cand.read_text(), str(cand), str(cand.resolve()))
-                    except (OSError, UnicodeDecodeError):
-                        pass
-                    break
+            found = next((d / rel for d in import_dirs(name) if (d / rel).is_file()), None)
+            if found is not None:
+                read(found)
 
-    for p in prelude:
+    def read(path: Path) -> None:
         try:
-            visit(p.read_text(), str(p), str(p.resolve()))
+            visit(path.read_text(), str(path), str(path.resolve()))
         except (OSError, UnicodeDecodeError):
             pass
+
+    for p in prelude:
+        read(p)
     visit(source, filename, f"<main>{filename}")
     return out
 
 
-def _inside(name: str, folder: Path) -> bool:
-    if name.startswith("<"):
-        return False
-    try:
-        return Path(name).resolve().is_relative_to(folder.resolve())
-    except OSError:
-        return False
-
-
-def start(source: str, filename: str, search_paths: list[Path], prelude: list[Path],
-          stdlib: Path) -> Helper | None:
+def start(source: str, filename: str, prelude: list[Path],
+          import_dirs: Callable[[str], list[Path]]) -> Helper | None:
     """Fork a helper for the files of this program that the parse cache lacks, if there
     are at least ``MIN_FILES`` of them; None if not worth it or not possible."""
     from . import parser
@@ -154,9 +141,9 @@ def start(source: str, filename: str, search_paths: list[Path], prelude: list[Pa
         return None
     _reap()
     try:
-        files = planned_files(source, filename, search_paths, prelude, stdlib)
-        todo = [(t, n) for t, n in files if not parser.is_cached(t, n)]
-        if len(todo) < MIN_FILES or not parser.cache_writable():
+        files = planned_files(source, filename, prelude, import_dirs)
+        missing = [(t, n) for t, n in files if not parser.is_cached(t, n)]
+        if len(missing) < MIN_FILES or not parser.cache_writable():
             return None
         parser.warm_up()  # lark's tables loaded before the fork: the helper starts parsing
         r, w = os.pipe()
@@ -175,7 +162,7 @@ def start(source: str, filename: str, search_paths: list[Path], prelude: list[Pa
         try:
             os.close(w)
             _detach(r)
-            _help(r, reversed(todo))
+            _help(r, reversed(missing))
         finally:
             os._exit(0)
     os.close(r)

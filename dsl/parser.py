@@ -106,7 +106,10 @@ def parse(source: str, filename: str) -> A.Program:
 
 def is_cached(source: str, filename: str) -> bool:
     """Whether ``parse(source, filename)`` would read its AST back rather than parse."""
-    key = _ast_key(source, filename)
+    return _is_cached(_ast_key(source, filename))
+
+
+def _is_cached(key: str) -> bool:
     return key in _ASTS or (cache_dir() / "ast" / f"{key}.pickle").is_file()
 
 
@@ -130,12 +133,11 @@ def parse_for_cache(source: str, filename: str) -> tuple[str, bytes] | None:
     """The cache key and pickled AST of ``source``, what :func:`parse` keeps on disk
     (:func:`store` writes it), or None if it is there already or has a syntax error (left
     to :func:`parse` to report; dsl/parse_ahead.py's helper calls this)."""
-    if is_cached(source, filename):
+    key = _ast_key(source, filename)
+    if _is_cached(key):
         return None
     try:
-        program = _parse(source, filename)
-        return _ast_key(source, filename), pickle.dumps(program,
-                                                        protocol=pickle.HIGHEST_PROTOCOL)
+        return key, pickle.dumps(_parse(source, filename), protocol=pickle.HIGHEST_PROTOCOL)
     except Exception:  # noqa: BLE001 - reported by the loader's own parse
         return None
 

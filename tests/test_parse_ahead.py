@@ -22,6 +22,10 @@ pytestmark = pytest.mark.skipif(not hasattr(os, "fork") or (os.cpu_count() or 1)
                                 reason="parsing ahead needs os.fork and two CPUs")
 
 
+def _dirs(importer: str) -> list[Path]:
+    return imports.import_dirs(importer, [])  # no search paths, as load_program's default
+
+
 @pytest.fixture
 def empty_cache(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Path:
     monkeypatch.setenv("RDSL_CACHE_DIR", str(tmp_path / "cache"))
@@ -45,8 +49,8 @@ def _load(path: Path, monkeypatch: pytest.MonkeyPatch, ahead: bool) -> tuple[lis
 
 def test_the_plan_is_what_the_loader_loads(empty_cache: Path,
                                            monkeypatch: pytest.MonkeyPatch) -> None:
-    plan = parse_ahead.planned_files(PATH_TRACER.read_text(), str(PATH_TRACER), [],
-                                     imports.prelude(), imports.STDLIB)
+    plan = parse_ahead.planned_files(PATH_TRACER.read_text(), str(PATH_TRACER),
+                                     imports.prelude(), _dirs)
     mods, own = _load(PATH_TRACER, monkeypatch, ahead=False)
     planned = [Path(name).resolve() for _, name in plan]
     assert sorted(planned) == sorted(Path(m.key).resolve() for m in mods)
@@ -103,7 +107,7 @@ def test_the_helper_keeps_no_output_pipe_open(tmp_path: Path) -> None:
     env = dict(os.environ, RDSL_CACHE_DIR=str(tmp_path / "cache"), RDSL_PARSE_AHEAD="1")
     code = ("import os, sys, time; from pathlib import Path; from rdsl.dsl import imports, "
             "parse_ahead; p = Path(sys.argv[1]); h = parse_ahead.start(p.read_text(), "
-            "str(p), [], imports.prelude(), imports.STDLIB); time.sleep(0.05); "
+            "str(p), imports.prelude(), lambda i: imports.import_dirs(i, [])); time.sleep(0.05); "
             "d = f'/proc/{h.pid}/fd'; "
             "print(sorted((int(f), os.readlink(f'{d}/{f}')) for f in os.listdir(d)))")
     if not Path("/proc/self/fd").is_dir():
@@ -118,10 +122,10 @@ def test_the_helper_keeps_no_output_pipe_open(tmp_path: Path) -> None:
 
 def test_off_by_the_environment(empty_cache: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.setenv(parse_ahead.ENV, "0")
-    assert parse_ahead.start(PATH_TRACER.read_text(), str(PATH_TRACER), [],
-                             imports.prelude(), imports.STDLIB) is None
+    assert parse_ahead.start(PATH_TRACER.read_text(), str(PATH_TRACER), imports.prelude(),
+                             _dirs) is None
     monkeypatch.setenv(parse_ahead.ENV, "1")
-    helper = parse_ahead.start(PATH_TRACER.read_text(), str(PATH_TRACER), [],
-                               imports.prelude(), imports.STDLIB)
+    helper = parse_ahead.start(PATH_TRACER.read_text(), str(PATH_TRACER), imports.prelude(),
+                               _dirs)
     assert helper is not None
     helper.stop()
