@@ -104,31 +104,38 @@ def planned_files(source: str, filename: str, prelude: list[Path],
                   import_dirs: Callable[[str], list[Path]]) -> list[tuple[str, str]]:
     """``(text, filename)`` of each file the loader will probably parse, in its order (the
     prelude, the main text, then depth first what each imports, looked up in
-    ``import_dirs(importer)`` as the loader does); never raises."""
+    ``import_dirs(importer)`` as the loader does); never raises.  Module-level helpers, not
+    closures: a closure that calls itself is a reference cycle, which here would hold
+    ``import_dirs`` and so the loader and every AST until the cycle collector ran
+    (tests/test_compile_garbage.py)."""
     out: list[tuple[str, str]] = []
     seen: set[str] = set()
-
-    def visit(text: str, name: str, key: str) -> None:
-        if key in seen:
-            return
-        seen.add(key)
-        out.append((text, name))
-        for m in _IMPORT.finditer(text):
-            rel = Path(*re.split(r"[ \t]*\.[ \t]*", m.group(1))).with_suffix(".rdsl")
-            found = next((d / rel for d in import_dirs(name) if (d / rel).is_file()), None)
-            if found is not None:
-                read(found)
-
-    def read(path: Path) -> None:
-        try:
-            visit(path.read_text(), str(path), str(path.resolve()))
-        except (OSError, UnicodeDecodeError):
-            pass
-
     for p in prelude:
-        read(p)
-    visit(source, filename, f"<main>{filename}")
+        _read(p, import_dirs, out, seen)
+    _visit(source, filename, f"<main>{filename}", import_dirs, out, seen)
     return out
+
+
+def _visit(text: str, name: str, key: str, import_dirs: Callable[[str], list[Path]],
+           out: list[tuple[str, str]], seen: set[str]) -> None:
+    if key in seen:
+        return
+    seen.add(key)
+    out.append((text, name))
+    for m in _IMPORT.finditer(text):
+        rel = Path(*re.split(r"[ \t]*\.[ \t]*", m.group(1))).with_suffix(".rdsl")
+        found = next((d / rel for d in import_dirs(name) if (d / rel).is_file()), None)
+        if found is not None:
+            _read(found, import_dirs, out, seen)
+
+
+def _read(path: Path, import_dirs: Callable[[str], list[Path]],
+          out: list[tuple[str, str]], seen: set[str]) -> None:
+    try:
+        text, key = path.read_text(), str(path.resolve())
+    except (OSError, RuntimeError, UnicodeDecodeError):
+        return
+    _visit(text, str(path), key, import_dirs, out, seen)
 
 
 def start(source: str, filename: str, prelude: list[Path],
