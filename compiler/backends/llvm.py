@@ -25,6 +25,7 @@ from ..targets import Target, get_target
 from .base import Backend, c_name, kernels, result_names
 from .llvm_entry import emit_kernel
 from .llvm_ops import I32, LOWER, Lowering, const, ll_type
+from .llvm_records import enabled as records_enabled
 from .llvm_rays import RAY_LOWER
 
 LOWER.update(RAY_LOWER)  # ray queries (Embree) are lowered in their own file
@@ -49,7 +50,7 @@ class LLVMBackend(Backend):
 class _ModuleLowering:
     """Lowers a module: one body function plus C entry points per kernel."""
 
-    def __init__(self, module: ir.Module, target: Target) -> None:
+    def __init__(self, module: ir.Module, target: Target, records: bool = True) -> None:
         self.ir = module
         self.target = target
         self.width = LLVMBackend().check_module(module)
@@ -58,6 +59,7 @@ class _ModuleLowering:
                                f"`{target.name}` has width {target.width}")
         self.mod = L.Module(name=module.attrs.get("name", "rdsl"))
         self.mod.triple = target.triple
+        self.records = records and records_enabled(target, self.width)
         self._intrinsics: dict[str, L.Function] = {}
         self.entry = emit_kernel  # the entry points around each body: C, or CUDA's
         self.rules = LOWER  # the lowering rule of each op (llvm_ops)
@@ -138,9 +140,11 @@ class _ModuleLowering:
 # Public API
 
 
-def lower_module(module: ir.Module, target: Target | str) -> L.Module:
-    """The unoptimized llvmlite module for ``module``."""
-    return _ModuleLowering(module, get_target(target)).run()
+def lower_module(module: ir.Module, target: Target | str, quick: bool = False) -> L.Module:
+    """The unoptimized llvmlite module for ``module``.  ``quick`` (the quick tier): no
+    record loads (llvm_records), whose per-lane loads and shuffles cost the quick tier
+    more compile time than the kernel they speed up runs at O0."""
+    return _ModuleLowering(module, get_target(target), records=not quick).run()
 
 
 def release_module(lowered: L.Module) -> None:
@@ -195,7 +199,7 @@ def optimized_module(module: ir.Module, target: Target | str, speed: int = 3,
     selection (see :func:`emit_object`)."""
     t = get_target(target)
     llvm = _binding()
-    lowered = lower_module(module, t)
+    lowered = lower_module(module, t, quick)
     text = str(lowered)
     release_module(lowered)
     try:

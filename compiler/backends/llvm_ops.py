@@ -16,6 +16,9 @@ import numpy as np
 from .. import ir
 from ..builtins import F32_INTRINSICS
 from ..diagnostics import CompileError
+from .llvm_records import emit as emit_record
+from .llvm_records import plan as plan_records
+from .llvm_records import split_index
 from .llvm_runs import consecutive_run
 
 F32 = L.FloatType()
@@ -95,6 +98,8 @@ class Lowering:
         self.vals: dict[ir.Value, L.Value] = {}
         self._from_memory: dict[ir.Value, bool] = {}
         self.runs: dict[tuple[ir.Value, int], tuple] = {}  # llvm_runs.consecutive_run's checks
+        self.records: dict[ir.Instr, Any] = {}  # llvm_records.plan's groups, by member
+        self.records_on = getattr(mod, "records", False)  # _ModuleLowering: llvm_records
 
     # -- helpers ------------------------------------------------------------------------
     def v(self, value: ir.Value) -> L.Value:
@@ -146,6 +151,8 @@ class Lowering:
             self.runs = outer
 
     def _block(self, blk: ir.Block) -> list[L.Value] | None:
+        if self.records_on:
+            self.records.update(plan_records(self, blk))
         for ins in blk.instrs:
             if ins.op is ir.Op.YIELD:
                 return [self.v(o) for o in ins.operands]
@@ -430,6 +437,12 @@ def _lower_gather(lw: Lowering, ins: ir.Instr) -> L.Value:
     buf, idx, mask = ins.operands
     e = _buf_elem(buf)
     mty = MEM[e.name]
+    group = lw.records.get(ins)
+    if group is not None:  # a field of a record: llvm_records
+        k = split_index(idx)[1]
+        if not group.values:
+            emit_record(lw, group, ins, k)
+        return _from_mem(lw, group.values[k], e)
     m = lw.v(mask)
     p = _gep(lw, lw.v(buf), lw.index64(idx), mty)
     if not isinstance(m.type, L.VectorType):  # W == 1: a branch around the load
