@@ -5,7 +5,8 @@ of rendering and plugins: O0 and O3 give the same results bit for bit (no fast-m
 contraction; ``tests/test_quick_tier.py`` checks a render of each), and O0 compiles in about
 60% of the time, which is most of this suite's.  The tests of code generation itself build
 the full tier, as users get it: the backend's op semantics, the differential corpus, the
-kernel ABI and layouts, the bit-identical reference images and the tiers' own test.  Run
+kernel ABI and layouts, the bit-identical reference images, the record loads (which only
+the full tier has) and the tiers' own test.  Run
 ``RDSL_QUICK=0 pytest tests`` to build everything at the full tier.
 
 Assigning a scene parameter does not start a speculative build of the adjoint kernel
@@ -31,7 +32,7 @@ os.environ.setdefault("RDSL_PREBUILD", "0")
 os.environ.setdefault("RDSL_GENERIC_FIRST", "0")
 
 FULL_TIER = {"test_llvm_backend", "test_differential", "test_c_abi", "test_kernel_layouts",
-             "test_bit_identical", "test_quick_tier"}
+             "test_bit_identical", "test_quick_tier", "test_llvm_records"}
 
 
 @pytest.fixture(scope="module", autouse=True)

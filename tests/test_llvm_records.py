@@ -2,12 +2,14 @@
 and a transpose (compiler/backends/llvm_records.py): the values are those of a lane-by-lane
 run, on active lanes, inactive lanes and a masked tail; a record that ends where the
 buffer's memory ends is read without touching the page after it; a store between two
-fields' reads splits the group, so the second read sees the store; and the lowered kernel
-has the loads instead of the gathers."""
+fields' reads splits the group, so the second read sees the store; the lowered kernel
+has the loads instead of the gathers; and scenes rendered by the full tier (the only one
+with record loads) give the bit-identical table's images (tests/test_bit_identical.py)."""
 
 from __future__ import annotations
 
 import ctypes
+import json
 import mmap
 
 import numpy as np
@@ -138,3 +140,21 @@ def test_one_load_per_lane_instead_of_a_gather_per_field(target):
     calls = body("store_between")  # the store splits P's fields: two gathers stay
     assert sum("llvm.masked.gather" in c for c in calls) == 3
     assert not any("llvm.masked.load.v4" in c for c in calls)
+
+
+@pytest.mark.parametrize("case", ["cbox/rgb/specialized", "cbox/rgb/generic",
+                                  "materials/rgb/specialized"])
+def test_full_tier_scenes_render_the_recorded_images(case, monkeypatch):
+    pytest.importorskip("rdsl.runtime.embree")
+    import test_bit_identical as bit
+    from rdsl.runtime.render import renderer
+
+    target = bit._host_target()
+    if target is None:
+        pytest.skip(f"this machine runs none of {bit.TARGETS}, the targets the hashes cover")
+    name, variant, build = case.split("/")
+    path = {"cbox": bit.CBOX, "materials": bit.MATERIALS}[name]
+    monkeypatch.setattr(renderer, "QUICK_SAMPLES", 0)  # every render at the full tier
+    want = json.loads(bit.TABLE.read_text())[bit.key(name, variant, build == "specialized",
+                                                      target)]
+    assert bit.render_hash(path, variant, build == "specialized", target) == want

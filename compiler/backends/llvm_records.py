@@ -6,21 +6,23 @@ geometry record ``G[4 * g + 0..3]``, a uv ``UV[2 * i + 0..1]``.  Each field is a
 gather of its own (``vgatherdps``: on Zen 4 about 9 ns for 16 lanes), where one masked load
 of the record's 4 elements per lane and a transpose (two rounds of unpacks) give every
 field at once: measured on this project's Zen 4 host, 17 ns for the three fields of 16
-vertices against 29 ns for three gathers (docs/bench.md, stop 39).
+vertices against 29 ns for three gathers (docs/bench.md, stop 40).
 
 Contract: :func:`plan` groups the gathers of one IR block that read one buffer under one
 mask at ``base + k`` for constants ``k`` within a window of 4 (``base`` the same value, or
 the same product of a value and a constant in either operand order), where no instruction
 between them writes memory (``store``, ``scatter``, ``call``, or a region holding one), and
-only those whose i32 index comes from memory (the others take the consecutive-run check of
-``llvm_runs``), of 4-byte elements, at 8 or 16 lanes on an x86 target with AVX2 or
-AVX-512.  :func:`emit` lowers a group where its first member stands (which dominates the
-others: the operands of every member are defined there) and returns each member's value:
-for an active lane the element the gather would read, for an inactive lane 0, as the
-gather's pass-through.  Each lane's load is masked to the fields the group reads, so it
-touches no element that a gather would not (no read past a buffer's end), and an inactive
-lane reads a zeroed private constant instead of its own address.  Values are bit for bit
-those of the gathers (tests/test_llvm_records.py, tests/test_bit_identical.py).
+only those whose i32 index comes from memory or is strided (``c * x`` plus uniform terms,
+``|c| >= 2``: a texel's channels, a film pixel's); the others may walk an array lane by
+lane and take the consecutive-run check of ``llvm_runs``.  Elements of 4 bytes, at 8 or
+16 lanes on an x86 target with AVX2 or AVX-512.  :func:`emit` lowers a group where its
+first member stands (which dominates the others: the operands of every member are defined
+there) and returns each member's value: for an active lane the element the gather would
+read, for an inactive lane 0, as the gather's pass-through.  Each lane's load is masked to
+the fields the group reads, so it touches no element that a gather would not (no read past
+a buffer's end), and an inactive lane reads a zeroed private constant instead of its own
+address.  Values are bit for bit those of the gathers (tests/test_llvm_records.py,
+tests/test_bit_identical.py).
 """
 
 from __future__ import annotations
@@ -92,6 +94,37 @@ def split_index(idx: ir.Value) -> tuple[Any, int]:
     return ("value", idx), offset
 
 
+def _uniform(v: ir.Value) -> bool:
+    o = v.owner
+    return isinstance(o, ir.Instr) and o.op is ir.Op.BROADCAST \
+        and o.operands[0].type.lanes == 1
+
+
+def _strided(base: Any) -> bool:
+    """Whether a base from :func:`split_index` is ``c * x`` with ``|c| >= 2``, plus or minus
+    uniform terms: two lanes' indices then differ by a multiple of ``c``, never by 1, so
+    the consecutive-run check of ``llvm_runs`` could only succeed for a single active lane
+    and is not worth its compare and branch."""
+    if base[0] == "mul":
+        return abs(base[2]) >= 2
+    v = base[1]
+    while True:
+        o = v.owner
+        if not isinstance(o, ir.Instr):
+            return False
+        if o.op is ir.Op.MUL:
+            return any(abs(_const_int(x) or 0) >= 2 for x in o.operands)
+        if o.op not in (ir.Op.ADD, ir.Op.SUB):
+            return False
+        a, c = o.operands
+        if _uniform(c):
+            v = a
+        elif _uniform(a) and o.op is ir.Op.ADD:
+            v = c
+        else:
+            return False
+
+
 def _writes(ins: ir.Instr) -> bool:
     if ins.op in _WRITES:
         return True
@@ -112,11 +145,11 @@ def plan(lw: Any, blk: ir.Block) -> dict[ir.Instr, Group]:
         if ins.op is not ir.Op.GATHER:
             continue
         buf, idx, mask = ins.operands
-        if idx.type.name != "i32" or not lw.from_memory(idx):
-            continue
-        if MEM[_buf_elem(buf).name] not in (L.FloatType(), I32):
+        if idx.type.name != "i32" or MEM[_buf_elem(buf).name] not in (L.FloatType(), I32):
             continue
         base, k = split_index(idx)
+        if not (lw.from_memory(idx) or _strided(base)):
+            continue
         open_.setdefault((buf, base, mask), []).append((ins, k))
     closed.extend(open_.values())
     out: dict[ir.Instr, Group] = {}
